@@ -1,1 +1,3 @@
+pub mod mps;
 pub mod proto;
+pub mod scene;

@@ -1,0 +1,133 @@
+//! Cell-list neighbour search in O(N) with a fixed neighbour order.
+use super::particles::Vector;
+use rayon::prelude::*;
+
+/// Particles per parallel work item when building lists: a constant, so the split (and the
+/// resulting order) never depends on the thread count.
+const LIST_CHUNK: usize = 512;
+
+/// Neighbour lists in compressed rows: the neighbours of i are
+/// `indices[offsets[i]..offsets[i + 1]]`, in ascending cell order, then ascending index.
+#[derive(Debug, Clone, Default)]
+pub struct Neighbours {
+    pub cutoff_m: f64,
+    pub offsets: Vec<usize>,
+    pub indices: Vec<u32>,
+}
+
+impl Neighbours {
+    #[inline]
+    pub fn of(&self, i: usize) -> &[u32] {
+        &self.indices[self.offsets[i]..self.offsets[i + 1]]
+    }
+
+    /// All j != i with |r_j - r_i| < cutoff_m.
+    pub fn build<const D: usize>(positions: &[Vector<D>], cutoff_m: f64) -> Self {
+        let n = positions.len();
+        if n == 0 {
+            return Self {
+                cutoff_m,
+                offsets: vec![0],
+                indices: Vec::new(),
+            };
+        }
+        let mut lo = positions[0];
+        let mut hi = positions[0];
+        for p in positions {
+            lo = lo.inf(p);
+            hi = hi.sup(p);
+        }
+        let mut dims = [1usize; D];
+        for a in 0..D {
+            dims[a] = (((hi[a] - lo[a]) / cutoff_m).floor() as usize) + 1;
+        }
+        let cell_of = |p: &Vector<D>| -> [usize; D] {
+            let mut c = [0usize; D];
+            for a in 0..D {
+                c[a] = (((p[a] - lo[a]) / cutoff_m).floor() as usize).min(dims[a] - 1);
+            }
+            c
+        };
+        let flat = |c: &[usize; D]| -> usize {
+            let mut f = 0;
+            for a in (0..D).rev() {
+                f = f * dims[a] + c[a];
+            }
+            f
+        };
+        let cell_count: usize = dims.iter().product();
+        // Counting sort of particle indices by cell: stable, so ascending index within a cell.
+        let cells: Vec<usize> = positions.par_iter().map(|p| flat(&cell_of(p))).collect();
+        let mut start = vec![0usize; cell_count + 1];
+        for &c in &cells {
+            start[c + 1] += 1;
+        }
+        for c in 0..cell_count {
+            start[c + 1] += start[c];
+        }
+        let mut fill = start.clone();
+        let mut sorted = vec![0u32; n];
+        for (i, &c) in cells.iter().enumerate() {
+            sorted[fill[c]] = i as u32;
+            fill[c] += 1;
+        }
+
+        let cutoff2 = cutoff_m * cutoff_m;
+        let chunks: Vec<(Vec<usize>, Vec<u32>)> = (0..n.div_ceil(LIST_CHUNK))
+            .into_par_iter()
+            .map(|chunk| {
+                let range = chunk * LIST_CHUNK..((chunk + 1) * LIST_CHUNK).min(n);
+                let mut counts = Vec::with_capacity(range.len());
+                let mut list = Vec::with_capacity(range.len() * 32);
+                for i in range {
+                    let before = list.len();
+                    let pi = positions[i];
+                    let ci = cell_of(&pi);
+                    // Visit the 3^D surrounding cells in a fixed (flat) order.
+                    for k in 0..3usize.pow(D as u32) {
+                        let mut rest = k;
+                        let mut c = [0usize; D];
+                        let mut inside = true;
+                        for a in 0..D {
+                            let off = (rest % 3) as i64 - 1;
+                            rest /= 3;
+                            let v = ci[a] as i64 + off;
+                            if v < 0 || v >= dims[a] as i64 {
+                                inside = false;
+                                break;
+                            }
+                            c[a] = v as usize;
+                        }
+                        if !inside {
+                            continue;
+                        }
+                        let f = flat(&c);
+                        for &j in &sorted[start[f]..start[f + 1]] {
+                            if j as usize != i
+                                && (positions[j as usize] - pi).norm_squared() < cutoff2
+                            {
+                                list.push(j);
+                            }
+                        }
+                    }
+                    counts.push(list.len() - before);
+                }
+                (counts, list)
+            })
+            .collect();
+        let mut offsets = Vec::with_capacity(n + 1);
+        offsets.push(0);
+        let mut indices = Vec::with_capacity(chunks.iter().map(|c| c.1.len()).sum());
+        for (counts, list) in chunks {
+            for c in counts {
+                offsets.push(offsets.last().unwrap() + c);
+            }
+            indices.extend_from_slice(&list);
+        }
+        Self {
+            cutoff_m,
+            offsets,
+            indices,
+        }
+    }
+}

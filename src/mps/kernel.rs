@@ -1,0 +1,63 @@
+//! MPS weight function and the reference values n0 and lambda (Koshizuka & Oka 1996).
+
+/// Weight w(r) = re/r - 1 for 0 < r < re, else 0 (seed 000, used by eqs. 3 and 4).
+#[inline]
+pub fn weight(distance_m: f64, radius_m: f64) -> f64 {
+    if distance_m > 0.0 && distance_m < radius_m {
+        radius_m / distance_m - 1.0
+    } else {
+        0.0
+    }
+}
+
+/// Reference values of an interior particle on a full, regular lattice of spacing l0.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RefValues {
+    /// Effective radius for number density and gradient (m).
+    pub radius_n_m: f64,
+    /// Effective radius for the Laplacian (m).
+    pub radius_lap_m: f64,
+    /// n0: number density with `radius_n_m`.
+    pub n0: f64,
+    /// n0 with `radius_lap_m` (normalises the Laplacian, eq. 4).
+    pub n0_lap: f64,
+    /// lambda = sum w r^2 / sum w with `radius_lap_m` (m^2).
+    pub lambda_m2: f64,
+}
+
+impl RefValues {
+    /// Sums over the lattice points j != 0 of a D-dimensional square/cubic lattice.
+    pub fn on_lattice<const D: usize>(spacing_m: f64, radius_n_m: f64, radius_lap_m: f64) -> Self {
+        let reach = (radius_n_m.max(radius_lap_m) / spacing_m).ceil() as i64 + 1;
+        let side = (2 * reach + 1) as usize;
+        let mut n0 = 0.0;
+        let mut n0_lap = 0.0;
+        let mut wr2 = 0.0;
+        // Walk the lattice in a fixed order so the sums (and their rounding) never change.
+        for flat in 0..side.pow(D as u32) {
+            let mut rest = flat;
+            let mut r2 = 0.0;
+            for _ in 0..D {
+                let k = (rest % side) as i64 - reach;
+                rest /= side;
+                let x = k as f64 * spacing_m;
+                r2 += x * x;
+            }
+            if r2 == 0.0 {
+                continue;
+            }
+            let r = r2.sqrt();
+            n0 += weight(r, radius_n_m);
+            let w = weight(r, radius_lap_m);
+            n0_lap += w;
+            wr2 += w * r2;
+        }
+        RefValues {
+            radius_n_m,
+            radius_lap_m,
+            n0,
+            n0_lap,
+            lambda_m2: wr2 / n0_lap,
+        }
+    }
+}

@@ -1,0 +1,11 @@
+//! The MPS solver core, generic over the dimension `D` (2 or 3).
+pub mod grid;
+pub mod kernel;
+pub mod operators;
+pub mod particles;
+pub mod pressure;
+pub mod reduce;
+pub mod solver;
+
+pub use particles::{ParticleKind, Particles, Vector};
+pub use solver::{Solver, SolverConfig, StepError, StepReport};

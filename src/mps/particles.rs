@@ -1,0 +1,72 @@
+//! Particle data as parallel arrays (struct of arrays).
+use nalgebra::SVector;
+
+pub type Vector<const D: usize> = SVector<f64, D>;
+
+/// What a particle is. The discriminants are part of the recorded state (`kind` field).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u32)]
+pub enum ParticleKind {
+    /// Moves with the flow.
+    Fluid = 0,
+    /// Wall layer next to the fluid: takes part in the pressure Poisson equation.
+    Wall = 1,
+    /// Dummy layers behind the wall: count in the number density only.
+    Dummy = 2,
+}
+
+impl ParticleKind {
+    pub fn from_u32(v: u32) -> Option<Self> {
+        match v {
+            0 => Some(Self::Fluid),
+            1 => Some(Self::Wall),
+            2 => Some(Self::Dummy),
+            _ => None,
+        }
+    }
+    /// Has a pressure of its own (fluid and wall particles).
+    #[inline]
+    pub fn has_pressure(self) -> bool {
+        !matches!(self, Self::Dummy)
+    }
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct Particles<const D: usize> {
+    pub position_m: Vec<Vector<D>>,
+    pub velocity_m_s: Vec<Vector<D>>,
+    pub pressure_pa: Vec<f64>,
+    pub kind: Vec<ParticleKind>,
+}
+
+impl<const D: usize> Default for Particles<D> {
+    fn default() -> Self {
+        Self {
+            position_m: Vec::new(),
+            velocity_m_s: Vec::new(),
+            pressure_pa: Vec::new(),
+            kind: Vec::new(),
+        }
+    }
+}
+
+impl<const D: usize> Particles<D> {
+    pub fn len(&self) -> usize {
+        self.position_m.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.position_m.is_empty()
+    }
+    pub fn push(&mut self, position_m: Vector<D>, kind: ParticleKind) {
+        self.position_m.push(position_m);
+        self.velocity_m_s.push(Vector::<D>::zeros());
+        self.pressure_pa.push(0.0);
+        self.kind.push(kind);
+    }
+    pub fn fluid_count(&self) -> usize {
+        self.kind
+            .iter()
+            .filter(|k| **k == ParticleKind::Fluid)
+            .count()
+    }
+}

@@ -1,0 +1,429 @@
+//! One time step of the MPS method (DESIGN.md section 3), stage by stage.
+use super::grid::Neighbours;
+use super::kernel::{RefValues, weight};
+use super::operators::{gradient, laplacian, number_density};
+use super::particles::{ParticleKind, Particles, Vector};
+use super::pressure::{CsrMatrix, SolveReport, solve_pcg};
+use super::reduce::max_by;
+use rayon::prelude::*;
+
+/// Physical and numerical parameters of the solver, all in SI units.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SolverConfig<const D: usize> {
+    pub spacing_m: f64,
+    pub density_kg_m3: f64,
+    pub viscosity_pa_s: f64,
+    /// Magnitude of gravity, acting along the last axis towards -inf.
+    pub gravity_m_s2: f64,
+    pub radius_n_m: f64,
+    pub radius_lap_m: f64,
+    /// beta: a particle is on the free surface when n* < beta n0.
+    pub surface_threshold: f64,
+    /// gamma: relaxation of the number-density source term.
+    pub relaxation_coefficient: f64,
+    pub compressibility_1_pa: f64,
+    pub collision_distance_m: f64,
+    pub collision_restitution: f64,
+    pub ppe_tolerance: f64,
+    pub ppe_max_iterations: u32,
+    pub courant: f64,
+    pub dt_max_s: f64,
+    /// Blow-up guard: a step fails when a particle gets faster than this.
+    pub max_speed_m_s: f64,
+    /// Fluid particles must stay inside this box.
+    pub domain_min_m: Vector<D>,
+    pub domain_max_m: Vector<D>,
+}
+
+/// Why a step could not be completed.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum StepError {
+    #[error("non-finite position or velocity at particle {particle} (step {step})")]
+    NonFinite { particle: usize, step: u64 },
+    #[error(
+        "particle {particle} speed {speed_m_s:.3e} m/s exceeds stop.max_speed_m_s = {limit_m_s} (step {step})"
+    )]
+    TooFast {
+        particle: usize,
+        speed_m_s: f64,
+        limit_m_s: f64,
+        step: u64,
+    },
+    #[error("fluid particle {particle} left the domain (step {step})")]
+    LeftDomain { particle: usize, step: u64 },
+    #[error(
+        "pressure solve did not converge: relative residual {residual:.3e} after {iterations} iterations (step {step})"
+    )]
+    PressureNotConverged {
+        residual: f64,
+        iterations: u32,
+        step: u64,
+    },
+}
+
+/// What one step did, for diagnostics.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StepReport {
+    pub dt_s: f64,
+    pub ppe: SolveReport,
+    pub surface_count: usize,
+}
+
+pub struct Solver<const D: usize> {
+    pub config: SolverConfig<D>,
+    pub refs: RefValues,
+    pub particles: Particles<D>,
+    pub time_s: f64,
+    pub step: u64,
+    neighbours: Neighbours,
+}
+
+impl<const D: usize> Solver<D> {
+    pub fn new(config: SolverConfig<D>, particles: Particles<D>) -> Self {
+        let refs =
+            RefValues::on_lattice::<D>(config.spacing_m, config.radius_n_m, config.radius_lap_m);
+        Self {
+            config,
+            refs,
+            particles,
+            time_s: 0.0,
+            step: 0,
+            neighbours: Neighbours::default(),
+        }
+    }
+
+    fn gravity(&self) -> Vector<D> {
+        let mut g = Vector::<D>::zeros();
+        g[D - 1] = -self.config.gravity_m_s2;
+        g
+    }
+
+    /// Largest fluid speed (m/s).
+    pub fn max_fluid_speed_m_s(&self) -> f64 {
+        let p = &self.particles;
+        max_by(p.len(), |i| {
+            if p.kind[i] == ParticleKind::Fluid {
+                p.velocity_m_s[i].norm()
+            } else {
+                0.0
+            }
+        })
+    }
+
+    /// Time step from the CFL condition (Courant number on the largest speed), the explicit
+    /// viscous limit dt <= 0.2 l0^2 / nu, and dt_max; never past `end_time_s`.
+    pub fn next_dt_s(&self, end_time_s: f64) -> f64 {
+        let c = &self.config;
+        let mut dt = c.dt_max_s;
+        let speed = self.max_fluid_speed_m_s();
+        if speed > 0.0 {
+            dt = dt.min(c.courant * c.spacing_m / speed);
+        }
+        let nu = c.viscosity_pa_s / c.density_kg_m3;
+        if nu > 0.0 {
+            dt = dt.min(0.2 * c.spacing_m * c.spacing_m / nu);
+        }
+        let remaining = end_time_s - self.time_s;
+        if remaining < dt {
+            dt = remaining;
+        }
+        dt
+    }
+
+    /// Advances the state by dt_s.
+    pub fn step(&mut self, dt_s: f64) -> Result<StepReport, StepError> {
+        let c = self.config.clone();
+        let rho = c.density_kg_m3;
+
+        // (1) Viscosity and gravity give the predicted velocity u* (explicit Newtonian term
+        // nu <lap u>, eq. 4, walls at rest give no-slip), then (2) r* = r + dt u*.
+        self.neighbours = Neighbours::build(&self.particles.position_m, c.radius_lap_m);
+        let nu = c.viscosity_pa_s / rho;
+        let g = self.gravity();
+        {
+            let p = &self.particles;
+            let nb = &self.neighbours;
+            let refs = self.refs;
+            let accel: Vec<Vector<D>> = (0..p.len())
+                .into_par_iter()
+                .map(|i| {
+                    if p.kind[i] != ParticleKind::Fluid {
+                        return Vector::<D>::zeros();
+                    }
+                    let visc = if nu > 0.0 {
+                        laplacian::<D, D>(
+                            &p.position_m,
+                            nb.of(i),
+                            i,
+                            refs.radius_lap_m,
+                            refs.n0_lap,
+                            refs.lambda_m2,
+                            |j| Some(p.velocity_m_s[j] - p.velocity_m_s[i]),
+                        ) * nu
+                    } else {
+                        Vector::<D>::zeros()
+                    };
+                    visc + g
+                })
+                .collect();
+            let p = &mut self.particles;
+            for i in 0..p.len() {
+                if p.kind[i] == ParticleKind::Fluid {
+                    p.velocity_m_s[i] += accel[i] * dt_s;
+                    p.position_m[i] += p.velocity_m_s[i] * dt_s;
+                }
+            }
+        }
+
+        // Neighbours at the predicted positions, used by every later stage of the step.
+        self.neighbours = Neighbours::build(&self.particles.position_m, c.radius_lap_m);
+        self.collide(dt_s);
+
+        // (3) Number density n*, free surface, pressure Poisson equation.
+        let (number_density, surface) = self.number_density_and_surface();
+        let surface_count = (0..self.particles.len())
+            .filter(|&i| self.particles.kind[i] == ParticleKind::Fluid && surface[i])
+            .count();
+        let ppe = self.solve_pressure(dt_s, &number_density, &surface);
+        if !ppe.converged {
+            return Err(StepError::PressureNotConverged {
+                residual: ppe.relative_residual,
+                iterations: ppe.iterations,
+                step: self.step,
+            });
+        }
+
+        // (4) Correct velocity and position with the pressure gradient.
+        self.correct_with_pressure_gradient(dt_s);
+
+        self.time_s += dt_s;
+        self.step += 1;
+        self.check_state()?;
+        Ok(StepReport {
+            dt_s,
+            ppe,
+            surface_count,
+        })
+    }
+
+    /// (5) Collision model: fluid pairs closer than the collision distance that approach each
+    /// other exchange momentum along their line of centres with restitution e (equal masses;
+    /// walls are immovable). Jacobi-style: all impulses from the pre-collision velocities.
+    fn collide(&mut self, dt_s: f64) {
+        let c = &self.config;
+        if c.collision_distance_m <= 0.0 {
+            return;
+        }
+        let p = &self.particles;
+        let nb = &self.neighbours;
+        let d2 = c.collision_distance_m * c.collision_distance_m;
+        let e = c.collision_restitution;
+        let dv: Vec<Vector<D>> = (0..p.len())
+            .into_par_iter()
+            .map(|i| {
+                let mut dv = Vector::<D>::zeros();
+                if p.kind[i] != ParticleKind::Fluid {
+                    return dv;
+                }
+                for &j in nb.of(i) {
+                    let j = j as usize;
+                    if p.kind[j] == ParticleKind::Dummy {
+                        continue;
+                    }
+                    let r = p.position_m[j] - p.position_m[i];
+                    let r2 = r.norm_squared();
+                    if r2 >= d2 || r2 == 0.0 {
+                        continue;
+                    }
+                    let n = r / r2.sqrt();
+                    let approach = (p.velocity_m_s[i] - p.velocity_m_s[j]).dot(&n);
+                    if approach > 0.0 {
+                        let share = if p.kind[j] == ParticleKind::Fluid {
+                            0.5
+                        } else {
+                            1.0
+                        };
+                        dv -= n * ((1.0 + e) * share * approach);
+                    }
+                }
+                dv
+            })
+            .collect();
+        let p = &mut self.particles;
+        for i in 0..p.len() {
+            p.velocity_m_s[i] += dv[i];
+            p.position_m[i] += dv[i] * dt_s;
+        }
+    }
+
+    /// n*_i with radius re_n over all particles (dummies included: they fill the wall's
+    /// support) and the free-surface flag n*_i < beta n0.
+    fn number_density_and_surface(&self) -> (Vec<f64>, Vec<bool>) {
+        let p = &self.particles;
+        let nb = &self.neighbours;
+        let re = self.refs.radius_n_m;
+        let n: Vec<f64> = (0..p.len())
+            .into_par_iter()
+            .map(|i| number_density(&p.position_m, nb.of(i), i, re, |_| true))
+            .collect();
+        let threshold = self.config.surface_threshold * self.refs.n0;
+        let surface = n.iter().map(|&n| n < threshold).collect();
+        (n, surface)
+    }
+
+    /// PPE (Koshizuka & Oka): -<lap p>_i + rho kappa p_i / dt^2 = gamma rho/dt^2 (n*_i - n0)/n0
+    /// for fluid and wall particles not on the surface; p = 0 on the surface (Dirichlet).
+    /// Assembled once in CSR and solved by Jacobi-PCG; negative pressure is clipped to 0.
+    fn solve_pressure(
+        &mut self,
+        dt_s: f64,
+        number_density: &[f64],
+        surface: &[bool],
+    ) -> SolveReport {
+        let c = &self.config;
+        let p = &self.particles;
+        let nb = &self.neighbours;
+        let refs = self.refs;
+        let rho = c.density_kg_m3;
+        let unknown_of: Vec<u32> = {
+            let mut next = 0u32;
+            (0..p.len())
+                .map(|i| {
+                    if p.kind[i].has_pressure() && !surface[i] {
+                        next += 1;
+                        next - 1
+                    } else {
+                        u32::MAX
+                    }
+                })
+                .collect()
+        };
+        let rows: Vec<usize> = (0..p.len())
+            .filter(|&i| unknown_of[i] != u32::MAX)
+            .collect();
+        let coef = 2.0 * D as f64 / (refs.lambda_m2 * refs.n0_lap);
+        let diag_extra = rho * c.compressibility_1_pa / (dt_s * dt_s);
+        let source_scale = c.relaxation_coefficient * rho / (dt_s * dt_s);
+        let assembled: Vec<(f64, f64, Vec<(u32, f64)>)> = rows
+            .par_iter()
+            .map(|&i| {
+                let mut diag = diag_extra;
+                let mut entries = Vec::new();
+                for &j in nb.of(i) {
+                    let j = j as usize;
+                    if !p.kind[j].has_pressure() {
+                        continue;
+                    }
+                    let a = coef
+                        * weight(
+                            (p.position_m[j] - p.position_m[i]).norm(),
+                            refs.radius_lap_m,
+                        );
+                    if a == 0.0 {
+                        continue;
+                    }
+                    diag += a;
+                    if unknown_of[j] != u32::MAX {
+                        entries.push((unknown_of[j], -a));
+                    }
+                }
+                let source = source_scale * (number_density[i] - refs.n0) / refs.n0;
+                (diag, source, entries)
+            })
+            .collect();
+        let mut matrix = CsrMatrix::default();
+        let mut rhs = Vec::with_capacity(rows.len());
+        matrix.row_offsets.push(0);
+        for (diag, source, entries) in assembled {
+            matrix.diagonal.push(diag);
+            rhs.push(source);
+            for (col, v) in entries {
+                matrix.columns.push(col);
+                matrix.values.push(v);
+            }
+            matrix.row_offsets.push(matrix.columns.len());
+        }
+        let mut solution = vec![0.0; rows.len()];
+        let report = solve_pcg(
+            &matrix,
+            &rhs,
+            &mut solution,
+            c.ppe_tolerance,
+            c.ppe_max_iterations,
+        );
+        let pressure = &mut self.particles.pressure_pa;
+        pressure.iter_mut().for_each(|v| *v = 0.0);
+        for (k, &i) in rows.iter().enumerate() {
+            pressure[i] = solution[k].max(0.0);
+        }
+        report
+    }
+
+    /// u += -dt/rho <grad p>, r += dt * (change of u), with the gradient model (eq. 3) using
+    /// p_j - min_k p_k over i and its neighbours (keeps the pair force repulsive).
+    fn correct_with_pressure_gradient(&mut self, dt_s: f64) {
+        let p = &self.particles;
+        let nb = &self.neighbours;
+        let refs = self.refs;
+        let scale = -dt_s / self.config.density_kg_m3;
+        let dv: Vec<Vector<D>> = (0..p.len())
+            .into_par_iter()
+            .map(|i| {
+                if p.kind[i] != ParticleKind::Fluid {
+                    return Vector::<D>::zeros();
+                }
+                let mut p_min = p.pressure_pa[i];
+                for &j in nb.of(i) {
+                    let j = j as usize;
+                    if p.kind[j].has_pressure()
+                        && weight((p.position_m[j] - p.position_m[i]).norm(), refs.radius_n_m) > 0.0
+                    {
+                        p_min = p_min.min(p.pressure_pa[j]);
+                    }
+                }
+                gradient(&p.position_m, nb.of(i), i, refs.radius_n_m, refs.n0, |j| {
+                    p.kind[j].has_pressure().then(|| p.pressure_pa[j] - p_min)
+                }) * scale
+            })
+            .collect();
+        let p = &mut self.particles;
+        for i in 0..p.len() {
+            p.velocity_m_s[i] += dv[i];
+            p.position_m[i] += dv[i] * dt_s;
+        }
+    }
+
+    /// Blow-up guards after a step: finite state, speed limit, domain box.
+    fn check_state(&self) -> Result<(), StepError> {
+        let c = &self.config;
+        let p = &self.particles;
+        for i in 0..p.len() {
+            if p.kind[i] != ParticleKind::Fluid {
+                continue;
+            }
+            let (x, v) = (p.position_m[i], p.velocity_m_s[i]);
+            if !x.iter().chain(v.iter()).all(|a| a.is_finite()) {
+                return Err(StepError::NonFinite {
+                    particle: i,
+                    step: self.step,
+                });
+            }
+            let speed = v.norm();
+            if speed > c.max_speed_m_s {
+                return Err(StepError::TooFast {
+                    particle: i,
+                    speed_m_s: speed,
+                    limit_m_s: c.max_speed_m_s,
+                    step: self.step,
+                });
+            }
+            if (0..D).any(|a| x[a] < c.domain_min_m[a] || x[a] > c.domain_max_m[a]) {
+                return Err(StepError::LeftDomain {
+                    particle: i,
+                    step: self.step,
+                });
+            }
+        }
+        Ok(())
+    }
+}

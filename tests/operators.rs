@@ -1,0 +1,180 @@
+//! MPS operators on a regular lattice against exact values (DESIGN.md section 3).
+use mps_runner::mps::Vector;
+use mps_runner::mps::grid::Neighbours;
+use mps_runner::mps::kernel::{RefValues, weight};
+use mps_runner::mps::operators::{gradient, laplacian, number_density};
+use mps_runner::mps::pressure::{CsrMatrix, solve_pcg};
+
+/// Square/cubic lattice of side `side` cells with spacing l0; returns positions and the index
+/// of a particle in the middle.
+fn lattice<const D: usize>(side: usize, l0: f64) -> (Vec<Vector<D>>, usize) {
+    let mut pos = Vec::new();
+    for flat in 0..side.pow(D as u32) {
+        let mut rest = flat;
+        let p = Vector::<D>::from_fn(|_, _| {
+            let k = rest % side;
+            rest /= side;
+            k as f64 * l0 + 0.37 // offset: the operators must not depend on the origin
+        });
+        pos.push(p);
+    }
+    let mid = (0..D).fold(0, |acc, _| acc * side + side / 2);
+    (pos, mid)
+}
+
+#[test]
+fn n0_and_lambda_match_hand_sums_in_2d() {
+    let l0 = 0.01;
+    let refs = RefValues::on_lattice::<2>(l0, 2.1 * l0, 3.1 * l0);
+    // re = 2.1: neighbours at 1 (x4), sqrt 2 (x4), 2 (x4) spacings.
+    let n0 = 4.0 * (2.1 - 1.0) + 4.0 * (2.1 / 2f64.sqrt() - 1.0) + 4.0 * (2.1 / 2.0 - 1.0);
+    assert!((refs.n0 - n0).abs() < 1e-12, "{} vs {}", refs.n0, n0);
+    // re = 3.1 adds sqrt5 (x8), sqrt8 (x4), 3 (x4).
+    let shells: [(f64, f64); 6] = [
+        (1.0, 4.0),
+        (2f64.sqrt(), 4.0),
+        (2.0, 4.0),
+        (5f64.sqrt(), 8.0),
+        (8f64.sqrt(), 4.0),
+        (3.0, 4.0),
+    ];
+    let (mut sw, mut swr2) = (0.0, 0.0);
+    for (r, m) in shells {
+        let w = 3.1 / r - 1.0;
+        sw += m * w;
+        swr2 += m * w * (r * l0) * (r * l0);
+    }
+    assert!((refs.n0_lap - sw).abs() < 1e-12);
+    assert!((refs.lambda_m2 - swr2 / sw).abs() < 1e-18);
+    assert_eq!(weight(3.1 * l0, 3.1 * l0), 0.0, "w vanishes at re");
+}
+
+fn check_operators<const D: usize>() {
+    let l0 = 0.02;
+    let (pos, mid) = lattice::<D>(9, l0);
+    let refs = RefValues::on_lattice::<D>(l0, 2.1 * l0, 3.1 * l0);
+    let nb = Neighbours::build(&pos, refs.radius_lap_m);
+    let list = nb.of(mid);
+
+    // Number density of an interior particle equals n0.
+    let n = number_density(&pos, list, mid, refs.radius_n_m, |_| true);
+    assert!(
+        (n - refs.n0).abs() < 1e-12 * refs.n0,
+        "n = {n}, n0 = {}",
+        refs.n0
+    );
+
+    // Gradient of a linear field a . x + c is exact on a full lattice.
+    let a = Vector::<D>::from_fn(|k, _| 1.5 - 0.7 * k as f64);
+    let phi = |p: &Vector<D>| a.dot(p) + 3.0;
+    let g = gradient(&pos, list, mid, refs.radius_n_m, refs.n0, |j| {
+        Some(phi(&pos[j]) - phi(&pos[mid]))
+    });
+    assert!((g - a).norm() < 1e-10, "gradient {g:?} vs {a:?}");
+
+    // Laplacian of a quadratic |x|^2 (plus linear terms) is exactly 2D.
+    let q = |p: &Vector<D>| p.norm_squared() + a.dot(p);
+    let lap = laplacian::<D, 1>(
+        &pos,
+        list,
+        mid,
+        refs.radius_lap_m,
+        refs.n0_lap,
+        refs.lambda_m2,
+        |j| Some(nalgebra::SVector::<f64, 1>::new(q(&pos[j]) - q(&pos[mid]))),
+    );
+    assert!(
+        (lap[0] - 2.0 * D as f64).abs() < 1e-9,
+        "laplacian {} vs {}",
+        lap[0],
+        2 * D
+    );
+
+    // Neighbour lists hold exactly the particles within the cutoff, none twice, not i itself.
+    for i in 0..pos.len() {
+        let brute: Vec<u32> = (0..pos.len())
+            .filter(|&j| j != i && (pos[j] - pos[i]).norm() < refs.radius_lap_m)
+            .map(|j| j as u32)
+            .collect();
+        let mut got = nb.of(i).to_vec();
+        got.sort();
+        assert_eq!(got, brute, "neighbours of {i}");
+    }
+}
+
+#[test]
+fn operators_exact_on_lattice_2d() {
+    check_operators::<2>();
+}
+
+#[test]
+fn operators_exact_on_lattice_3d() {
+    check_operators::<3>();
+}
+
+/// 5-point Poisson matrix on an m x m grid with Dirichlet borders (SPD).
+fn poisson(m: usize) -> CsrMatrix {
+    let mut a = CsrMatrix {
+        row_offsets: vec![0],
+        ..Default::default()
+    };
+    for y in 0..m {
+        for x in 0..m {
+            a.diagonal.push(4.0);
+            let mut cols = Vec::new();
+            if y > 0 {
+                cols.push((y - 1) * m + x)
+            }
+            if x > 0 {
+                cols.push(y * m + x - 1)
+            }
+            if x + 1 < m {
+                cols.push(y * m + x + 1)
+            }
+            if y + 1 < m {
+                cols.push((y + 1) * m + x)
+            }
+            for c in cols {
+                a.columns.push(c as u32);
+                a.values.push(-1.0);
+            }
+            a.row_offsets.push(a.columns.len());
+        }
+    }
+    a
+}
+
+#[test]
+fn pcg_meets_its_residual_tolerance() {
+    let m = 40;
+    let a = poisson(m);
+    let x_true: Vec<f64> = (0..m * m)
+        .map(|i| ((i * 37 % 101) as f64 / 101.0) - 0.3)
+        .collect();
+    let mut b = vec![0.0; m * m];
+    a.multiply(&x_true, &mut b);
+    let mut x = vec![0.0; m * m];
+    let tol = 1e-10;
+    let report = solve_pcg(&a, &b, &mut x, tol, 10_000);
+    assert!(report.converged, "{report:?}");
+    // The true residual (not the recursively updated one) meets the tolerance.
+    let mut ax = vec![0.0; m * m];
+    a.multiply(&x, &mut ax);
+    let r: f64 = ax
+        .iter()
+        .zip(&b)
+        .map(|(p, q)| (p - q) * (p - q))
+        .sum::<f64>()
+        .sqrt();
+    let bn: f64 = b.iter().map(|v| v * v).sum::<f64>().sqrt();
+    assert!(r / bn < 10.0 * tol, "true residual {}", r / bn);
+    let err = x
+        .iter()
+        .zip(&x_true)
+        .map(|(p, q)| (p - q).abs())
+        .fold(0.0, f64::max);
+    assert!(err < 1e-6, "max error {err}");
+    // An iteration cap below what the system needs is reported as not converged.
+    let capped = solve_pcg(&a, &b, &mut x, tol, 5);
+    assert!(!capped.converged && capped.iterations == 5);
+}
