@@ -1,1 +1,3 @@
+pub mod build_info;
 pub mod proto;
+pub mod record;
