@@ -13,7 +13,8 @@ use prost::Message as _;
 const MANIFEST: &str =
     "name: sample\nexperiment: l_flow\n# a comment kept verbatim\nyield_stress_pa: 120\n";
 const CANONICAL: &str = r#"{"experiment":"l_flow","name":"sample","yield_stress_pa":120}"#;
-const SHA: &str = "0f1e2d3c4b5a69788796a5b4c3d2e1f00f1e2d3c4b5a69788796a5b4c3d2e1f0";
+/// SHA-256 of `CANONICAL` (checked in `round_trip_of_a_finished_run`).
+const SHA: &str = "2d0e8737302751f624c2905e350c569e7c64825bc64c9f2cf19ecc6f74639604";
 
 fn overrides() -> Vec<String> {
     vec!["yield_stress_pa=120".into(), "name=\"sample\"".into()]
@@ -200,6 +201,8 @@ fn round_trip_of_a_finished_run() {
     // The overrides value is a JSON array that gives back the strings.
     let ov: Vec<String> = serde_json::from_str(&run.metadata["manifest"]["overrides"]).unwrap();
     assert_eq!(ov, overrides());
+    use sha2::Digest as _;
+    assert_eq!(hex::encode(sha2::Sha256::digest(CANONICAL.as_bytes())), SHA);
 }
 
 #[test]
@@ -504,4 +507,41 @@ fn point_cloud_packing_2d_and_3d() {
 #[should_panic(expected = "has 2 values for 3 particles")]
 fn point_cloud_rejects_a_short_field() {
     point_cloud(0, 2, &[0.0; 6], &[("speed_m_s", &[1.0, 2.0])]);
+}
+
+/// Runs `tools/check_mcap.py` (Python `mcap` + `mcap-protobuf-support`) on a finished and a
+/// killed recording. Needs the venv: `python3 -m venv .venv && .venv/bin/pip install -r
+/// tools/requirements.txt` (or `MPS_PYTHON=/path/to/python`).
+#[test]
+#[ignore = "needs the Python readers (tools/requirements.txt)"]
+fn python_reader_accepts_our_files() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let python = std::env::var("MPS_PYTHON")
+        .map(PathBuf::from)
+        .unwrap_or_else(|_| root.join(".venv/bin/python"));
+    let script = root.join("tools/check_mcap.py");
+    let dir = tempfile::tempdir().unwrap();
+    let (done, _) = finished_run(dir.path(), 0.0);
+    let killed = dir.path().join("killed.mcap");
+    let (rec, _) = record_run(&killed, 2, 0.0);
+    std::mem::forget(rec);
+
+    let run = |args: &[&std::ffi::OsStr]| {
+        let out = std::process::Command::new(&python)
+            .arg(&script)
+            .args(args)
+            .output()
+            .expect("run python");
+        let text = String::from_utf8_lossy(&out.stdout).to_string()
+            + &String::from_utf8_lossy(&out.stderr);
+        (out.status.success(), text)
+    };
+    let (ok, text) = run(&[done.as_os_str()]);
+    assert!(ok, "{text}");
+    let partial = partial_path(&killed);
+    let (ok, text) = run(&["--partial".as_ref(), partial.as_os_str()]);
+    assert!(ok, "{text}");
+    // Without --partial, an unfinished file must be refused.
+    let (ok, text) = run(&[partial.as_os_str()]);
+    assert!(!ok, "{text}");
 }
