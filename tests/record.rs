@@ -441,6 +441,23 @@ fn corrupt_complete_file_is_an_error() {
     assert!(read_run(&path).is_err());
 }
 
+#[test]
+fn files_that_are_not_run_files_are_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = dir.path().join("notes.mcap");
+    fs::write(&text, "name: not an mcap file\n").unwrap();
+    assert!(read_run(&text).is_err());
+    let empty = dir.path().join("empty.mcap");
+    fs::write(&empty, b"").unwrap();
+    assert!(read_run(&empty).is_err());
+    // Magic only, cut inside the header record.
+    let (path, _) = finished_run(dir.path(), 0.0);
+    let bytes = fs::read(&path).unwrap();
+    fs::write(&empty, &bytes[..12]).unwrap();
+    assert!(read_run(&empty).is_err());
+    assert!(read_run(&dir.path().join("missing.mcap")).is_err());
+}
+
 fn f32_at(data: &[u8], at: usize) -> f32 {
     f32::from_le_bytes(data[at..at + 4].try_into().unwrap())
 }

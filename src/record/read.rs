@@ -55,15 +55,26 @@ pub fn read_run(path: &Path) -> Result<RunFile> {
         ..RunFile::default()
     };
     let mut channels: BTreeMap<u16, ChannelInfo> = BTreeMap::new();
+    let mut saw_header = false;
     for record in reader {
         let record = match record {
             Ok(r) => r,
-            Err(e) if !complete => {
+            // Only a file that starts as an MCAP file may end in an unreadable tail.
+            Err(e) if !complete && saw_header => {
                 run.tail_error = Some(e.to_string());
                 break;
             }
             Err(e) => return Err(mcap_err(path)(e)),
         };
+        if !saw_header {
+            if !matches!(record, Record::Header(_)) {
+                return Err(RecordError::Invalid {
+                    path: path.to_path_buf(),
+                    reason: "the first record is not an MCAP header".into(),
+                });
+            }
+            saw_header = true;
+        }
         match record {
             Record::Chunk { header, data } => {
                 // A chunk the linear reader yields is whole; damage inside it is an error.
@@ -88,6 +99,12 @@ pub fn read_run(path: &Path) -> Result<RunFile> {
             }
             _ => {}
         }
+    }
+    if !saw_header {
+        return Err(RecordError::Invalid {
+            path: path.to_path_buf(),
+            reason: "empty MCAP file (no header record)".into(),
+        });
     }
     Ok(run)
 }
