@@ -562,3 +562,38 @@ fn python_reader_accepts_our_files() {
     let (ok, text) = run(&[partial.as_os_str()]);
     assert!(!ok, "{text}");
 }
+
+/// Helper for `aborted_process_keeps_its_checkpoints`: run in a child process, writes three
+/// checkpoints and more messages, then aborts (no destructor, no buffer flush: like SIGKILL).
+#[test]
+#[ignore = "helper, run as a child process by aborted_process_keeps_its_checkpoints"]
+fn child_records_then_aborts() {
+    let Ok(path) = std::env::var("MPS_RECORD_CHILD_PATH") else {
+        return;
+    };
+    let (mut rec, _) = record_run(Path::new(&path), 3, 0.0);
+    rec.write_diagnostics(99, &diagnostics(99)).unwrap();
+    std::process::abort();
+}
+
+#[test]
+fn aborted_process_keeps_its_checkpoints() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("aborted.mcap");
+    let status = std::process::Command::new(std::env::current_exe().unwrap())
+        .args(["--ignored", "--exact", "child_records_then_aborts"])
+        .env("MPS_RECORD_CHILD_PATH", &path)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .status()
+        .unwrap();
+    assert!(!status.success(), "the child should have aborted");
+    assert!(!path.exists());
+    let run = read_run(&partial_path(&path)).unwrap();
+    let expected = (0..3).map(|k| state(k, 0.0)).collect::<Vec<_>>();
+    assert!(!run.complete);
+    assert_eq!(run.states, expected);
+    assert_eq!(run.diagnostics.len(), 9);
+    assert_eq!(run.summary, None);
+    assert_eq!(run.metadata["manifest"]["experiment_sha256"], SHA);
+}
