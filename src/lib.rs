@@ -1,3 +1,5 @@
+pub mod build_info;
 pub mod mps;
 pub mod proto;
+pub mod record;
 pub mod scene;

@@ -1,0 +1,43 @@
+use std::path::PathBuf;
+
+/// Errors while writing or reading a run file. Every variant names the file concerned.
+#[derive(Debug, thiserror::Error)]
+pub enum RecordError {
+    #[error("{}: {source}", path.display())]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("{}: MCAP: {source}", path.display())]
+    Mcap {
+        path: PathBuf,
+        #[source]
+        source: mcap::McapError,
+    },
+    #[error("{}: cannot decode {what}: {source}", path.display())]
+    Decode {
+        path: PathBuf,
+        what: String,
+        #[source]
+        source: prost::DecodeError,
+    },
+    #[error("{}: not a valid run file: {reason}", path.display())]
+    Invalid { path: PathBuf, reason: String },
+}
+
+pub type Result<T, E = RecordError> = std::result::Result<T, E>;
+
+pub(crate) fn io_err(path: &std::path::Path) -> impl FnOnce(std::io::Error) -> RecordError + '_ {
+    move |source| RecordError::Io {
+        path: path.to_path_buf(),
+        source,
+    }
+}
+
+pub(crate) fn mcap_err(path: &std::path::Path) -> impl FnOnce(mcap::McapError) -> RecordError + '_ {
+    move |source| RecordError::Mcap {
+        path: path.to_path_buf(),
+        source,
+    }
+}
