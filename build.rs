@@ -45,12 +45,22 @@ fn main() {
         .map(|o| !o.stdout.is_empty())
         .unwrap_or(false);
     println!("cargo:rustc-env=MPS_BUILD_RUSTC={rustc_version}");
-    println!("cargo:rustc-env=MPS_BUILD_TARGET={}", env::var("TARGET").unwrap_or_default());
-    println!("cargo:rustc-env=MPS_BUILD_PROFILE={}", env::var("PROFILE").unwrap_or_default());
+    println!(
+        "cargo:rustc-env=MPS_BUILD_TARGET={}",
+        env::var("TARGET").unwrap_or_default()
+    );
+    println!(
+        "cargo:rustc-env=MPS_BUILD_PROFILE={}",
+        env::var("PROFILE").unwrap_or_default()
+    );
     println!(
         "cargo:rustc-env=MPS_BUILD_GIT_COMMIT={}{}",
         git_commit,
-        if dirty && !git_commit.is_empty() { "-dirty" } else { "" }
+        if dirty && !git_commit.is_empty() {
+            "-dirty"
+        } else {
+            ""
+        }
     );
     println!("cargo:rerun-if-changed=.git/HEAD");
     println!("cargo:rerun-if-changed=.git/index");

@@ -1,0 +1,363 @@
+//! The time loop of one run: manifest -> scene -> solver -> MCAP recording.
+//!
+//! `mps/` does one step of the method; this module owns the process around it (output
+//! schedule, diagnostics, checkpoints, stop conditions, outcome).
+use crate::checkpoint;
+use crate::manifest::{Fluid, Manifest, Resolved, Scene as SceneSpec};
+use crate::mps::{ParticleKind, Particles, Solver, SolverConfig};
+use crate::proto::mps::v1::{CheckpointHash, Diagnostics, Summary};
+use crate::record::{Outcome, Recorder, RecordError, RunHeader, point_cloud};
+use crate::scene::{self, Scene};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+/// How to run (never part of the experiment: none of it changes the state bits).
+#[derive(Debug, Clone, Default)]
+pub struct RunOptions {
+    pub out_dir: PathBuf,
+    /// Worker threads; None = all cores.
+    pub threads: Option<usize>,
+    /// Progress lines on stderr.
+    pub progress: bool,
+    /// Set from outside (signal handler) to stop the run cleanly as "interrupted".
+    pub interrupt: Option<Arc<AtomicBool>>,
+}
+
+/// What a finished run produced.
+#[derive(Debug, Clone)]
+pub struct RunResult {
+    pub path: PathBuf,
+    pub outcome: Outcome,
+    pub summary: Summary,
+    /// Wall-clock seconds of the time loop (reported, never recorded).
+    pub wall_time_s: f64,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum RunError {
+    #[error("cannot create output directory {path}: {source}")]
+    OutDir {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("cannot start {threads} worker threads: {message}")]
+    Threads { threads: usize, message: String },
+    #[error(transparent)]
+    Record(#[from] RecordError),
+}
+
+/// File name of a run: `<name>-<first 12 hex of the experiment hash>.mcap`.
+pub fn output_path(out_dir: &Path, resolved: &Resolved) -> PathBuf {
+    out_dir.join(format!(
+        "{}-{}.mcap",
+        resolved.manifest.name,
+        resolved.short_hash()
+    ))
+}
+
+/// Runs the experiment and records it. A simulation that fails (blow-up, solver failure) or
+/// is interrupted still yields a finished MCAP file whose outcome says so: that is an `Ok`
+/// with a non-completed `outcome`. `Err` means the recording itself could not be made.
+pub fn run(resolved: &Resolved, options: &RunOptions) -> Result<RunResult, RunError> {
+    std::fs::create_dir_all(&options.out_dir).map_err(|source| RunError::OutDir {
+        path: options.out_dir.clone(),
+        source,
+    })?;
+    let threads = options
+        .threads
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .map_err(|e| RunError::Threads {
+            threads,
+            message: e.to_string(),
+        })?;
+    pool.install(|| match resolved.manifest.dimension {
+        3 => run_in::<3>(resolved, options, threads),
+        _ => run_in::<2>(resolved, options, threads),
+    })
+}
+
+/// Builds the scene a manifest describes.
+pub fn build_scene<const D: usize>(m: &Manifest) -> Scene<D> {
+    match &m.scene {
+        SceneSpec::DamBreak {
+            tank_width_m,
+            tank_height_m,
+            tank_depth_m,
+            column_width_m,
+            column_height_m,
+        } => scene::dam_break::build::<D>(
+            &scene::dam_break::DamBreak {
+                tank_width_m: *tank_width_m,
+                tank_height_m: *tank_height_m,
+                tank_depth_m: *tank_depth_m,
+                column_width_m: *column_width_m,
+                column_height_m: *column_height_m,
+            },
+            m.spacing_m,
+            m.mps.wall_layers,
+            m.mps.dummy_layers,
+        ),
+    }
+}
+
+/// Solver parameters from the manifest (radii and distances scaled by the spacing).
+pub fn solver_config<const D: usize>(m: &Manifest, scene: &Scene<D>) -> SolverConfig<D> {
+    let Fluid::Newtonian {
+        density_kg_m3,
+        viscosity_pa_s,
+    } = m.fluid.clone();
+    let l0 = m.spacing_m;
+    SolverConfig {
+        spacing_m: l0,
+        density_kg_m3,
+        viscosity_pa_s,
+        gravity_m_s2: m.gravity_m_s2,
+        radius_n_m: m.mps.number_density_radius * l0,
+        radius_lap_m: m.mps.laplacian_radius * l0,
+        surface_threshold: m.mps.surface_threshold,
+        relaxation_coefficient: m.mps.relaxation_coefficient,
+        compressibility_1_pa: m.mps.compressibility_1_pa,
+        collision_distance_m: m.mps.collision_distance * l0,
+        collision_restitution: m.mps.collision_restitution,
+        ppe_tolerance: m.mps.ppe_tolerance,
+        ppe_max_iterations: m.mps.ppe_max_iterations,
+        courant: m.time.courant,
+        dt_max_s: m.time.dt_max_s,
+        max_speed_m_s: m.stop.max_speed_m_s,
+        domain_min_m: scene.domain_min_m,
+        domain_max_m: scene.domain_max_m,
+    }
+}
+
+/// Metrics of the experiment at the current state (documented in the README).
+pub fn experiment_metrics<const D: usize>(
+    m: &Manifest,
+    particles: &Particles<D>,
+) -> BTreeMap<String, f64> {
+    let mut out = BTreeMap::new();
+    match &m.scene {
+        SceneSpec::DamBreak { .. } => {
+            out.insert(
+                "front_position_m".to_string(),
+                scene::dam_break::front_position_m(particles, m.spacing_m),
+            );
+        }
+    }
+    out
+}
+
+/// Simulation time in integer nanoseconds (MCAP log time).
+fn time_ns(time_s: f64) -> u64 {
+    (time_s * 1e9).round() as u64
+}
+
+/// Emission schedule of one output stream: fires at t = 0, interval, 2 interval, ... (the
+/// first step that reaches each multiple).
+struct Schedule {
+    interval_s: f64,
+    next: u64,
+}
+
+impl Schedule {
+    fn new(interval_s: f64) -> Self {
+        Self { interval_s, next: 0 }
+    }
+    fn due(&mut self, time_s: f64) -> bool {
+        if time_s >= self.next as f64 * self.interval_s {
+            while time_s >= self.next as f64 * self.interval_s {
+                self.next += 1;
+            }
+            true
+        } else {
+            false
+        }
+    }
+}
+
+fn diagnostics<const D: usize>(
+    m: &Manifest,
+    solver: &Solver<D>,
+    dt_s: f64,
+    report: Option<&crate::mps::StepReport>,
+) -> Diagnostics {
+    let p = &solver.particles;
+    let mass_kg = solver.config.density_kg_m3 * m.spacing_m.powi(D as i32);
+    let mut kinetic = 0.0;
+    for i in 0..p.len() {
+        if p.kind[i] == ParticleKind::Fluid {
+            kinetic += 0.5 * mass_kg * p.velocity_m_s[i].norm_squared();
+        }
+    }
+    Diagnostics {
+        step: solver.step as u32,
+        time_s: solver.time_s,
+        dt_s,
+        kinetic_energy_j: kinetic,
+        max_speed_m_s: solver.max_fluid_speed_m_s(),
+        ppe_iterations: report.map_or(0, |r| r.ppe.iterations),
+        ppe_relative_residual: report.map_or(0.0, |r| r.ppe.relative_residual),
+        surface_particle_count: report.map_or(0, |r| r.surface_count as u32),
+        fluid_particle_count: p.fluid_count() as u32,
+        metrics: experiment_metrics(m, p).into_iter().collect(),
+    }
+}
+
+fn cloud<const D: usize>(solver: &Solver<D>) -> crate::proto::foxglove::PointCloud {
+    let p = &solver.particles;
+    // Dummy particles are left out of the view: they only pad the walls.
+    let shown: Vec<usize> = (0..p.len())
+        .filter(|&i| p.kind[i] != ParticleKind::Dummy)
+        .collect();
+    let positions: Vec<f64> = shown
+        .iter()
+        .flat_map(|&i| p.position_m[i].iter().copied().collect::<Vec<_>>())
+        .collect();
+    let speed: Vec<f32> = shown
+        .iter()
+        .map(|&i| p.velocity_m_s[i].norm() as f32)
+        .collect();
+    let pressure: Vec<f32> = shown.iter().map(|&i| p.pressure_pa[i] as f32).collect();
+    let kind: Vec<f32> = shown.iter().map(|&i| p.kind[i] as u32 as f32).collect();
+    point_cloud(
+        time_ns(solver.time_s),
+        D,
+        &positions,
+        &[
+            ("speed_m_s", &speed),
+            ("pressure_pa", &pressure),
+            ("kind", &kind),
+        ],
+    )
+}
+
+fn run_in<const D: usize>(
+    resolved: &Resolved,
+    options: &RunOptions,
+    threads: usize,
+) -> Result<RunResult, RunError> {
+    let m = &resolved.manifest;
+    let scene = build_scene::<D>(m);
+    let config = solver_config(m, &scene);
+    let mut solver = Solver::new(config, scene.particles);
+    let path = output_path(&options.out_dir, resolved);
+    let header = RunHeader {
+        manifest_source: &resolved.source_text,
+        overrides: &resolved.overrides,
+        canonical: &resolved.canonical,
+        experiment_sha256: &resolved.hash_hex,
+        name: &m.name,
+        threads,
+    };
+    let mut recorder = Recorder::create(&path, &header)?;
+    let started = std::time::Instant::now();
+
+    let end_s = m.time.end_s;
+    let mut diag_schedule = Schedule::new(m.output.diagnostics_interval_s);
+    let mut cloud_schedule = Schedule::new(m.output.cloud_interval_s);
+    let mut checkpoint_schedule = Schedule::new(m.output.checkpoint_interval_s);
+    let mut progress_schedule = Schedule::new(end_s / 10.0);
+    let mut checkpoints: Vec<CheckpointHash> = Vec::new();
+    let mut last_checkpoint_step: Option<u64> = None;
+    let mut outcome = Outcome::Completed;
+    let mut stop_reason = String::new();
+    let mut report = None;
+    let mut dt_s = solver.next_dt_s(end_s);
+
+    loop {
+        let t = solver.time_s;
+        if diag_schedule.due(t) {
+            recorder.write_diagnostics(time_ns(t), &diagnostics(m, &solver, dt_s, report.as_ref()))?;
+        }
+        if cloud_schedule.due(t) {
+            recorder.write_cloud(time_ns(t), &cloud(&solver))?;
+        }
+        if checkpoint_schedule.due(t) {
+            let msg = checkpoint::to_message(checkpoints.len() as u32, &solver, dt_s);
+            checkpoints.push(CheckpointHash {
+                index: msg.index,
+                step: msg.step,
+                time_s: msg.time_s,
+                state_sha256: msg.state_sha256.clone(),
+            });
+            recorder.write_state(time_ns(t), &msg)?;
+            last_checkpoint_step = Some(solver.step);
+        }
+        if options.progress && progress_schedule.due(t) {
+            eprintln!(
+                "{}: t = {:.4} / {} s, step {}",
+                m.name, t, end_s, solver.step
+            );
+        }
+        // Stop when the remaining time is a negligible sliver of a step (float round-off).
+        if end_s - t <= 1e-9 * end_s {
+            break;
+        }
+        if solver.step >= m.stop.max_steps {
+            stop_reason = format!("stop.max_steps = {} reached", m.stop.max_steps);
+            break;
+        }
+        if let Some(flag) = &options.interrupt {
+            if flag.load(Ordering::SeqCst) {
+                outcome = Outcome::Interrupted("interrupted by signal".to_string());
+                break;
+            }
+        }
+        match solver.step(dt_s) {
+            Ok(r) => report = Some(r),
+            Err(e) => {
+                outcome = Outcome::Failed(e.to_string());
+                break;
+            }
+        }
+        dt_s = solver.next_dt_s(end_s);
+    }
+
+    // The final state is always checkpointed (unless the last step failed mid-way: its
+    // state is not a consistent MPS state, the previous checkpoint stands).
+    let failed = matches!(outcome, Outcome::Failed(_));
+    if !failed && last_checkpoint_step != Some(solver.step) {
+        let msg = checkpoint::to_message(checkpoints.len() as u32, &solver, dt_s);
+        checkpoints.push(CheckpointHash {
+            index: msg.index,
+            step: msg.step,
+            time_s: msg.time_s,
+            state_sha256: msg.state_sha256.clone(),
+        });
+        recorder.write_state(time_ns(solver.time_s), &msg)?;
+        recorder.write_diagnostics(
+            time_ns(solver.time_s),
+            &diagnostics(m, &solver, dt_s, report.as_ref()),
+        )?;
+        recorder.write_cloud(time_ns(solver.time_s), &cloud(&solver))?;
+    }
+
+    let p = &solver.particles;
+    let mut metrics: BTreeMap<String, f64> = experiment_metrics(m, p);
+    metrics.insert("particle_count".into(), p.len() as f64);
+    metrics.insert("fluid_particle_count".into(), p.fluid_count() as f64);
+    metrics.insert("steps".into(), solver.step as f64);
+    metrics.insert("simulated_time_s".into(), solver.time_s);
+    let reason = match &outcome {
+        Outcome::Completed => stop_reason,
+        other => other.reason().to_string(),
+    };
+    let summary = Summary {
+        outcome: outcome.as_str().to_string(),
+        reason,
+        metrics: metrics.into_iter().collect(),
+        checkpoints,
+        experiment_sha256: resolved.hash_hex.clone(),
+    };
+    let path = recorder.finish(time_ns(solver.time_s), &summary, &outcome)?;
+    Ok(RunResult {
+        path,
+        outcome,
+        summary,
+        wall_time_s: started.elapsed().as_secs_f64(),
+    })
+}

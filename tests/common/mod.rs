@@ -1,0 +1,31 @@
+//! Helpers shared by the integration tests.
+#![allow(dead_code)]
+use mps_runner::manifest::{self, Resolved};
+use mps_runner::run::{RunOptions, RunResult, run};
+use std::path::{Path, PathBuf};
+
+pub fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+pub fn experiment(name: &str) -> PathBuf {
+    root().join("experiments").join(name)
+}
+
+pub fn resolve(name: &str, sets: &[&str]) -> Resolved {
+    let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
+    manifest::load(&experiment(name), &sets).expect("manifest")
+}
+
+pub fn run_in(resolved: &Resolved, out_dir: &Path, threads: usize) -> RunResult {
+    run(
+        resolved,
+        &RunOptions {
+            out_dir: out_dir.to_path_buf(),
+            threads: Some(threads),
+            progress: false,
+            interrupt: None,
+        },
+    )
+    .expect("run")
+}
