@@ -1,0 +1,37 @@
+//! Canonical text of a resolved manifest and its SHA-256.
+//!
+//! Canonical form: compact JSON (no whitespace) of the fully resolved manifest, object keys
+//! sorted (serde_json's default `Map` is a `BTreeMap`: the `preserve_order` feature must stay
+//! off, which a test checks), `f64` fields always written as floats in serde_json's shortest
+//! round-trip form, `-0.0` written as `0.0`, integers as integers. JSON is YAML, so the
+//! canonical text loads back through [`super::from_str`] to the same manifest and hash.
+
+use serde_json::Value;
+use sha2::{Digest, Sha256};
+
+use super::types::Manifest;
+
+/// Replace every `-0.0` in `value` by `0.0`.
+pub fn normalise_negative_zero(value: &mut Value) {
+    match value {
+        // -0.0 == 0.0, so this rewrites both zeros as +0.0.
+        Value::Number(n) if n.is_f64() && n.as_f64() == Some(0.0) => {
+            *n = serde_json::Number::from_f64(0.0).expect("0.0 is finite");
+        }
+        Value::Array(items) => items.iter_mut().for_each(normalise_negative_zero),
+        Value::Object(map) => map.values_mut().for_each(normalise_negative_zero),
+        _ => {}
+    }
+}
+
+/// The canonical JSON text of `manifest`.
+pub fn canonical_text(manifest: &Manifest) -> String {
+    let mut value = serde_json::to_value(manifest).expect("a manifest always serializes to JSON");
+    normalise_negative_zero(&mut value);
+    serde_json::to_string(&value).expect("a JSON value always serializes")
+}
+
+/// Lowercase hex SHA-256 of the UTF-8 bytes of `text`.
+pub fn sha256_hex(text: &str) -> String {
+    hex::encode(Sha256::digest(text.as_bytes()))
+}

@@ -1,0 +1,369 @@
+//! Experiment manifests: typed YAML, validation, `--set` overrides, canonical form and hash.
+//!
+//! Pipeline of [`from_str`] / [`load`]:
+//! 1. the YAML text is deserialized into a typed [`Manifest`] by serde-saphyr (unknown
+//!    fields, missing fields, wrong types and YAML syntax errors come back as
+//!    [`ManifestError::Syntax`] with line, column and, where it can be found, the field path);
+//! 2. the manifest (defaults filled in) becomes a `serde_json::Value`; each override is
+//!    applied to it in order ([`ManifestError::Override`] on unknown keys and bad values);
+//! 3. `-0.0` is normalised and the value is turned back into a typed [`Manifest`];
+//! 4. every field is validated ([`ManifestError::Invalid`], located in the source when the
+//!    value was written there);
+//! 5. the canonical text and its SHA-256 are computed (see [`canonical`]).
+
+pub mod canonical;
+mod error;
+mod locate;
+pub mod overrides;
+mod types;
+pub mod validate;
+
+use std::collections::BTreeSet;
+use std::path::Path;
+
+pub use error::{ManifestError, Result};
+pub use types::{Fluid, Manifest, Mps, Output, Scene, Stop, Time};
+
+use locate::{Pos, SourceMap};
+use overrides::Touched;
+
+/// A manifest loaded, overridden, validated and hashed.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Resolved {
+    /// The fully resolved manifest.
+    pub manifest: Manifest,
+    /// The manifest file text as written.
+    pub source_text: String,
+    /// The `--set KEY=VALUE` strings applied, in order.
+    pub overrides: Vec<String>,
+    /// Canonical JSON text of the resolved manifest.
+    pub canonical: String,
+    /// Lowercase hex SHA-256 of `canonical` (64 characters).
+    pub hash_hex: String,
+}
+
+impl Resolved {
+    /// The first 12 hex digits of the hash (for file names).
+    pub fn short_hash(&self) -> &str {
+        &self.hash_hex[..12]
+    }
+}
+
+/// Read the manifest at `path`, apply `overrides` (`KEY=VALUE`), validate and hash it.
+/// Errors name the file as `path` was given.
+pub fn load(path: &Path, overrides: &[String]) -> Result<Resolved> {
+    let text = std::fs::read_to_string(path).map_err(|source| ManifestError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    from_str(&text, &path.display().to_string(), overrides)
+}
+
+/// Like [`load`], from text; `source_name` is used in error messages.
+pub fn from_str(text: &str, source_name: &str, overrides: &[String]) -> Result<Resolved> {
+    let parsed: Manifest = serde_saphyr::from_str_with_options(text, yaml_options())
+        .map_err(|e| syntax_error(&e, source_name, text))?;
+
+    // JSON has no NaN or infinity: catch them before the manifest becomes JSON.
+    let map = SourceMap::build(text);
+    if let Some(issue) = validate::check(&parsed).into_iter().find(|i| i.non_finite) {
+        let pos = map.written_pos(&issue.field);
+        return Err(ManifestError::Invalid {
+            source_name: source_name.to_string(),
+            field: issue.field,
+            line: pos.map(|p| p.line),
+            column: pos.map(|p| p.column),
+            message: issue.message,
+        });
+    }
+
+    let mut value = serde_json::to_value(&parsed).expect("a manifest always serializes to JSON");
+    let mut touched = Touched::default();
+    for raw in overrides {
+        overrides::apply(&mut value, raw, &mut touched)?;
+    }
+    canonical::normalise_negative_zero(&mut value);
+    let manifest = rebuild(&value, overrides)?;
+
+    if let Some(issue) = validate::check(&manifest).into_iter().next() {
+        let (pos, origin) = if touched.is_set(&issue.field) {
+            (None, " (from --set)")
+        } else if touched.is_reset(&issue.field) {
+            (None, " (default)")
+        } else {
+            match map.written_pos(&issue.field) {
+                Some(p) => (Some(p), ""),
+                None => (None, " (default)"),
+            }
+        };
+        return Err(ManifestError::Invalid {
+            source_name: source_name.to_string(),
+            field: issue.field,
+            line: pos.map(|p| p.line),
+            column: pos.map(|p| p.column),
+            message: format!("{}{origin}", issue.message),
+        });
+    }
+
+    let canonical = canonical::canonical_text(&manifest);
+    let hash_hex = canonical::sha256_hex(&canonical);
+    Ok(Resolved {
+        manifest,
+        source_text: text.to_string(),
+        overrides: overrides.to_vec(),
+        canonical,
+        hash_hex,
+    })
+}
+
+/// serde-saphyr options: the defaults (duplicate keys rejected, alias/size budget on), with
+/// snippets off since our errors carry their own location.
+fn yaml_options() -> serde_saphyr::Options {
+    let mut options = serde_saphyr::Options::default();
+    options.with_snippet = false;
+    options
+}
+
+/// Turn the (overridden) JSON value back into a typed manifest. The value goes through
+/// pretty JSON text and serde-saphyr, so that a type error has a location, which gives its
+/// field path, which names the override responsible.
+fn rebuild(value: &serde_json::Value, overrides: &[String]) -> Result<Manifest> {
+    let text = serde_json::to_string_pretty(value).expect("a JSON value always serializes");
+    serde_saphyr::from_str_with_options(&text, yaml_options()).map_err(|e| {
+        let Described { field, message, .. } = describe(&e, &SourceMap::build(&text));
+        let keys: Vec<&str> = overrides
+            .iter()
+            .filter_map(|o| overrides::split(o).ok().map(|(k, _)| k))
+            .collect();
+        let related = |k: &&&str| {
+            field.as_deref().is_some_and(|f| {
+                let k: &str = k;
+                f == k
+                    || f.starts_with(&format!("{k}."))
+                    || k.starts_with(&format!("{f}."))
+                    || parent(k) == parent(f)
+            })
+        };
+        let key = keys
+            .iter()
+            .rev()
+            .find(|k| Some(**k) == field.as_deref())
+            .or_else(|| keys.iter().rev().find(related))
+            .map(|k| k.to_string())
+            .or(field.clone())
+            .unwrap_or_else(|| "?".to_string());
+        let message = match &field {
+            Some(f) if *f != key => format!("{f}: {message}"),
+            _ => message,
+        };
+        ManifestError::Override { key, message }
+    })
+}
+
+fn parent(path: &str) -> &str {
+    path.rfind('.').map_or("", |i| &path[..i])
+}
+
+/// A serde-saphyr error as `ManifestError::Syntax`.
+fn syntax_error(e: &serde_saphyr::Error, source_name: &str, text: &str) -> ManifestError {
+    let map = SourceMap::build(text);
+    let d = describe(e, &map);
+    ManifestError::Syntax {
+        source_name: source_name.to_string(),
+        line: d.pos.map(|p| p.line),
+        column: d.pos.map(|p| p.column),
+        field: d.field,
+        message: d.message,
+    }
+}
+
+/// The error itself, without snippet or alias wrappers.
+fn inner(e: &serde_saphyr::Error) -> &serde_saphyr::Error {
+    let mut e = e.without_snippet();
+    while let serde_saphyr::Error::AliasError { error, .. } = e {
+        e = error.without_snippet();
+    }
+    e
+}
+
+/// Every field path of the manifest schema (sections included).
+fn schema_paths() -> BTreeSet<String> {
+    fn collect(v: &serde_json::Value, prefix: &str, out: &mut BTreeSet<String>) {
+        if let serde_json::Value::Object(map) = v {
+            for (k, child) in map {
+                let path = join(prefix, k);
+                collect(child, &path, out);
+                out.insert(path);
+            }
+        }
+    }
+    let mut out = BTreeSet::new();
+    for m in types::samples() {
+        collect(&serde_json::to_value(m).expect("serializes"), "", &mut out);
+    }
+    out
+}
+
+fn join(prefix: &str, seg: &str) -> String {
+    if prefix.is_empty() {
+        seg.to_string()
+    } else {
+        format!("{prefix}.{seg}")
+    }
+}
+
+/// `path`, then its ancestors up to the root `""`.
+fn ancestors(path: &str) -> impl Iterator<Item = &str> {
+    std::iter::successors(Some(path), |p| (!p.is_empty()).then(|| parent(p)))
+}
+
+/// What an error is about: field path, location and message.
+struct Described {
+    field: Option<String>,
+    pos: Option<Pos>,
+    message: String,
+}
+
+/// Field path (found from the error's location: serde-saphyr reports a struct's missing
+/// field at its last key, and errors inside internally tagged enums at the enum's key),
+/// location and message of a serde-saphyr error.
+fn describe(e: &serde_saphyr::Error, map: &SourceMap) -> Described {
+    use serde_saphyr::Error as E;
+    let e = inner(e);
+    let mut pos = e.location().filter(|l| l.line() > 0).map(|l| Pos {
+        line: l.line() as usize,
+        column: l.column() as usize,
+    });
+    let at: Option<String> = pos.and_then(|p| map.path_at(p)).map(str::to_string);
+    let list = |v: &[&str]| {
+        v.iter()
+            .map(|s| format!("`{s}`"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    let in_section = |path: &str| {
+        let section = parent(path);
+        if section.is_empty() {
+            String::new()
+        } else {
+            format!(" in `{section}`")
+        }
+    };
+    let (field, message) = match e {
+        E::SerdeUnknownField {
+            field, expected, ..
+        } => {
+            let k = at.clone().unwrap_or_default();
+            let path = if k.rsplit('.').next() == Some(field.as_str()) {
+                k
+            } else if let Some((p, entry)) = ancestors(&k)
+                .map(|s| join(s, field))
+                .find_map(|p| map.entries.get(&p).map(|e| (p, e)))
+            {
+                pos = Some(entry.key.0);
+                p
+            } else {
+                join(&k, field)
+            };
+            let message = format!(
+                "unknown field `{field}`{}, expected one of {}",
+                in_section(&path),
+                list(expected)
+            );
+            (Some(path), message)
+        }
+        E::SerdeMissingField { field, .. } => {
+            let k = at.clone().unwrap_or_default();
+            let schema = schema_paths();
+            let path = ancestors(&k)
+                .map(|s| join(s, field))
+                .find(|p| schema.contains(p))
+                .unwrap_or_else(|| field.to_string());
+            // Point at the section that lacks the field (its key), or at the first key of
+            // the document for a top-level field.
+            let section = parent(&path);
+            pos = if section.is_empty() {
+                map.entries
+                    .iter()
+                    .filter(|(p, _)| !p.contains('.'))
+                    .map(|(_, e)| e.key.0)
+                    .min()
+                    .or(pos)
+            } else {
+                map.entries.get(section).map(|e| e.key.0).or(pos)
+            };
+            let message = format!("missing required field `{field}`{}", in_section(&path));
+            (Some(path), message)
+        }
+        E::SerdeUnknownVariant {
+            variant, expected, ..
+        } => (
+            at,
+            format!(
+                "unknown variant `{variant}`, expected one of {}",
+                list(expected)
+            ),
+        ),
+        E::SerdeInvalidType { unexpected, .. } | E::SerdeInvalidValue { unexpected, .. } => {
+            // Inside an internally tagged enum the location is the enum's key: look for the
+            // offending scalar below it.
+            let mut field = at;
+            if let (Some(k), Some(text)) = (&field, quoted(unexpected)) {
+                let below: Vec<(&String, &locate::Entry)> = map
+                    .entries
+                    .iter()
+                    .filter(|(p, e)| {
+                        p.starts_with(&format!("{k}.")) && e.scalar.as_deref() == Some(text)
+                    })
+                    .collect();
+                if let [(p, entry)] = below[..] {
+                    pos = Some(entry.value.0);
+                    field = Some(p.clone());
+                }
+            }
+            (field, saphyr_message(e))
+        }
+        E::InvalidScalar { ty, .. } => {
+            let text = at
+                .as_deref()
+                .and_then(|p| map.entries.get(p))
+                .and_then(|e| e.scalar.as_deref());
+            let message = match text {
+                Some(t) => format!("invalid {ty}: {t:?}"),
+                None => format!("invalid {ty}"),
+            };
+            (at, message)
+        }
+        _ => (at, saphyr_message(e)),
+    };
+    Described {
+        field,
+        pos,
+        message,
+    }
+}
+
+/// The text between the first pair of `"` or backticks in serde's "unexpected" phrase,
+/// e.g. `string "abc"` -> `abc`.
+fn quoted(s: &str) -> Option<&str> {
+    let i = s.find(['"', '`'])?;
+    let q = s[i..].chars().next()?;
+    let rest = &s[i + 1..];
+    let j = rest.find(q)?;
+    Some(&rest[..j])
+}
+
+/// The message of a serde-saphyr error without location, control characters escaped.
+pub(crate) fn saphyr_message(e: &serde_saphyr::Error) -> String {
+    use serde_saphyr::MessageFormatter;
+    let msg = serde_saphyr::UserMessageFormatter.format_message(inner(e));
+    msg.chars()
+        .flat_map(|c| {
+            if c.is_control() {
+                c.escape_default().collect::<Vec<_>>()
+            } else {
+                vec![c]
+            }
+        })
+        .collect()
+}

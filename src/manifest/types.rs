@@ -1,0 +1,342 @@
+//! The typed experiment manifest.
+//!
+//! Every struct rejects unknown fields, and every field that has a default gets it through
+//! `#[serde(default = ...)]`, so a deserialized [`Manifest`] is always fully resolved.
+//! Units are part of the field names (SI throughout).
+//!
+//! Adding a variant to [`Fluid`] or [`Scene`] needs: the variant here, its name in
+//! [`Fluid::model_name`] / [`Scene::kind_name`], and its checks in `validate.rs`
+//! (the compiler points at every `match` that must learn about it).
+
+use serde::{Deserialize, Serialize};
+
+/// A complete experiment description.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Manifest {
+    /// Experiment name, `[A-Za-z0-9_.-]{1,64}`; it becomes part of file names.
+    pub name: String,
+    /// Spatial dimension: 2 or 3.
+    pub dimension: u32,
+    /// Initial particle spacing l0 in metres.
+    pub spacing_m: f64,
+    /// Gravitational acceleration in m/s^2, acting along -y in 2D and -z in 3D.
+    #[serde(default = "default_gravity_m_s2")]
+    pub gravity_m_s2: f64,
+    /// Time integration.
+    pub time: Time,
+    /// Fluid model and material constants.
+    pub fluid: Fluid,
+    /// MPS method parameters.
+    #[serde(default)]
+    pub mps: Mps,
+    /// Geometry of the test.
+    pub scene: Scene,
+    /// What is recorded and how often.
+    #[serde(default)]
+    pub output: Output,
+    /// When a run stops (besides `time.end_s`).
+    #[serde(default)]
+    pub stop: Stop,
+}
+
+impl Manifest {
+    /// The `kind` tag of the scene, e.g. `"dam_break"`.
+    pub fn scene_kind(&self) -> &'static str {
+        self.scene.kind_name()
+    }
+}
+
+fn default_gravity_m_s2() -> f64 {
+    9.81
+}
+
+/// Time integration settings.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Time {
+    /// Simulated end time in seconds.
+    pub end_s: f64,
+    /// Upper bound of the time step in seconds.
+    #[serde(default = "default_dt_max_s")]
+    pub dt_max_s: f64,
+    /// Courant number of the CFL time-step condition.
+    #[serde(default = "default_courant")]
+    pub courant: f64,
+}
+
+fn default_dt_max_s() -> f64 {
+    1.0e-3
+}
+fn default_courant() -> f64 {
+    0.2
+}
+
+/// Fluid model, tagged by the `model` key.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "model", rename_all = "snake_case", deny_unknown_fields)]
+pub enum Fluid {
+    /// A Newtonian fluid.
+    Newtonian {
+        /// Density in kg/m^3.
+        density_kg_m3: f64,
+        /// Dynamic viscosity in Pa s.
+        viscosity_pa_s: f64,
+    },
+}
+
+impl Fluid {
+    /// The `model` tag, e.g. `"newtonian"`.
+    pub fn model_name(&self) -> &'static str {
+        match self {
+            Fluid::Newtonian { .. } => "newtonian",
+        }
+    }
+
+    /// Density in kg/m^3 (every model has one).
+    pub fn density_kg_m3(&self) -> f64 {
+        match self {
+            Fluid::Newtonian { density_kg_m3, .. } => *density_kg_m3,
+        }
+    }
+}
+
+/// MPS method parameters. Radii and distances are in units of `spacing_m`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Mps {
+    /// Effective radius re for number density and gradient (units of spacing).
+    #[serde(default = "default_number_density_radius")]
+    pub number_density_radius: f64,
+    /// Effective radius re for the Laplacian (units of spacing).
+    #[serde(default = "default_laplacian_radius")]
+    pub laplacian_radius: f64,
+    /// beta: a particle is on the free surface when n* < beta n0.
+    #[serde(default = "default_surface_threshold")]
+    pub surface_threshold: f64,
+    /// gamma, relaxation coefficient of the PPE source term.
+    #[serde(default = "default_relaxation_coefficient")]
+    pub relaxation_coefficient: f64,
+    /// Artificial compressibility on the PPE diagonal, in 1/Pa.
+    #[serde(default = "default_compressibility_1_pa")]
+    pub compressibility_1_pa: f64,
+    /// Collision distance (units of spacing).
+    #[serde(default = "default_collision_distance")]
+    pub collision_distance: f64,
+    /// Restitution coefficient of the collision model.
+    #[serde(default = "default_collision_restitution")]
+    pub collision_restitution: f64,
+    /// Relative residual tolerance of the PPE conjugate-gradient solver.
+    #[serde(default = "default_ppe_tolerance")]
+    pub ppe_tolerance: f64,
+    /// Iteration cap of the PPE solver.
+    #[serde(default = "default_ppe_max_iterations")]
+    pub ppe_max_iterations: u32,
+    /// Wall particle layers (take part in the PPE).
+    #[serde(default = "default_wall_layers")]
+    pub wall_layers: u32,
+    /// Dummy particle layers behind the wall (count in the number density only).
+    #[serde(default = "default_dummy_layers")]
+    pub dummy_layers: u32,
+}
+
+impl Default for Mps {
+    fn default() -> Self {
+        Mps {
+            number_density_radius: default_number_density_radius(),
+            laplacian_radius: default_laplacian_radius(),
+            surface_threshold: default_surface_threshold(),
+            relaxation_coefficient: default_relaxation_coefficient(),
+            compressibility_1_pa: default_compressibility_1_pa(),
+            collision_distance: default_collision_distance(),
+            collision_restitution: default_collision_restitution(),
+            ppe_tolerance: default_ppe_tolerance(),
+            ppe_max_iterations: default_ppe_max_iterations(),
+            wall_layers: default_wall_layers(),
+            dummy_layers: default_dummy_layers(),
+        }
+    }
+}
+
+fn default_number_density_radius() -> f64 {
+    2.1
+}
+fn default_laplacian_radius() -> f64 {
+    3.1
+}
+fn default_surface_threshold() -> f64 {
+    0.97
+}
+fn default_relaxation_coefficient() -> f64 {
+    0.2
+}
+fn default_compressibility_1_pa() -> f64 {
+    0.45e-9
+}
+fn default_collision_distance() -> f64 {
+    0.5
+}
+fn default_collision_restitution() -> f64 {
+    0.2
+}
+fn default_ppe_tolerance() -> f64 {
+    1.0e-9
+}
+fn default_ppe_max_iterations() -> u32 {
+    2000
+}
+fn default_wall_layers() -> u32 {
+    1
+}
+fn default_dummy_layers() -> u32 {
+    2
+}
+
+/// Scene (test geometry), tagged by the `kind` key.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum Scene {
+    /// A rectangular fluid column collapsing in a tank (Martin & Moyce; Koshizuka & Oka).
+    /// The tank's lower-left(-front) inner corner is the origin; the column stands against
+    /// the wall at x = 0.
+    DamBreak {
+        /// Inner width of the tank along x, in metres.
+        #[serde(default = "default_tank_width_m")]
+        tank_width_m: f64,
+        /// Inner height of the tank along the vertical axis, in metres.
+        #[serde(default = "default_tank_height_m")]
+        tank_height_m: f64,
+        /// Inner depth of the tank along y (3D only), in metres.
+        #[serde(default = "default_tank_depth_m")]
+        tank_depth_m: f64,
+        /// Width of the fluid column along x, in metres.
+        #[serde(default = "default_column_width_m")]
+        column_width_m: f64,
+        /// Height of the fluid column, in metres.
+        #[serde(default = "default_column_height_m")]
+        column_height_m: f64,
+    },
+}
+
+impl Scene {
+    /// The `kind` tag, e.g. `"dam_break"`.
+    pub fn kind_name(&self) -> &'static str {
+        match self {
+            Scene::DamBreak { .. } => "dam_break",
+        }
+    }
+}
+
+fn default_tank_width_m() -> f64 {
+    1.0
+}
+fn default_tank_height_m() -> f64 {
+    0.6
+}
+fn default_tank_depth_m() -> f64 {
+    0.1
+}
+fn default_column_width_m() -> f64 {
+    0.25
+}
+fn default_column_height_m() -> f64 {
+    0.5
+}
+
+/// Recording intervals, in seconds of simulated time.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Output {
+    /// Interval between full-precision state checkpoints.
+    #[serde(default = "default_checkpoint_interval_s")]
+    pub checkpoint_interval_s: f64,
+    /// Interval between point-cloud frames.
+    #[serde(default = "default_cloud_interval_s")]
+    pub cloud_interval_s: f64,
+    /// Interval between diagnostics messages.
+    #[serde(default = "default_diagnostics_interval_s")]
+    pub diagnostics_interval_s: f64,
+}
+
+impl Default for Output {
+    fn default() -> Self {
+        Output {
+            checkpoint_interval_s: default_checkpoint_interval_s(),
+            cloud_interval_s: default_cloud_interval_s(),
+            diagnostics_interval_s: default_diagnostics_interval_s(),
+        }
+    }
+}
+
+fn default_checkpoint_interval_s() -> f64 {
+    0.1
+}
+fn default_cloud_interval_s() -> f64 {
+    0.02
+}
+fn default_diagnostics_interval_s() -> f64 {
+    0.005
+}
+
+/// Stop conditions besides the end time.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Stop {
+    /// Hard cap on the number of time steps.
+    #[serde(default = "default_max_steps")]
+    pub max_steps: u64,
+    /// Blow-up guard: a run whose particle speed exceeds this (m/s) fails.
+    #[serde(default = "default_max_speed_m_s")]
+    pub max_speed_m_s: f64,
+}
+
+impl Default for Stop {
+    fn default() -> Self {
+        Stop {
+            max_steps: default_max_steps(),
+            max_speed_m_s: default_max_speed_m_s(),
+        }
+    }
+}
+
+fn default_max_steps() -> u64 {
+    10_000_000
+}
+fn default_max_speed_m_s() -> f64 {
+    100.0
+}
+
+/// One manifest per variant of each tagged section, for learning the set of field paths
+/// (used to name the section of a missing field in error messages). Add new variants here.
+pub(crate) fn samples() -> Vec<Manifest> {
+    let fluids = [Fluid::Newtonian {
+        density_kg_m3: 1000.0,
+        viscosity_pa_s: 1.0e-3,
+    }];
+    let scenes = [Scene::DamBreak {
+        tank_width_m: default_tank_width_m(),
+        tank_height_m: default_tank_height_m(),
+        tank_depth_m: default_tank_depth_m(),
+        column_width_m: default_column_width_m(),
+        column_height_m: default_column_height_m(),
+    }];
+    let n = fluids.len().max(scenes.len());
+    (0..n)
+        .map(|i| Manifest {
+            name: "sample".to_string(),
+            dimension: 2,
+            spacing_m: 0.01,
+            gravity_m_s2: default_gravity_m_s2(),
+            time: Time {
+                end_s: 1.0,
+                dt_max_s: default_dt_max_s(),
+                courant: default_courant(),
+            },
+            fluid: fluids[i.min(fluids.len() - 1)].clone(),
+            mps: Mps::default(),
+            scene: scenes[i.min(scenes.len() - 1)].clone(),
+            output: Output::default(),
+            stop: Stop::default(),
+        })
+        .collect()
+}

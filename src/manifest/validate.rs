@@ -1,0 +1,334 @@
+//! Range and consistency checks of a deserialized manifest.
+//!
+//! Checks run in field order; the first failure is reported. Every `f64` is checked to be
+//! finite (YAML `.nan` / `.inf` reach typed `f64` fields unchanged).
+
+use super::types::{Fluid, Manifest, Scene};
+
+/// One failed check: the dotted field path and what is wrong (without provenance).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Issue {
+    pub field: String,
+    pub message: String,
+    /// The value is NaN or infinite.
+    pub non_finite: bool,
+}
+
+/// An interval bound check of an `f64`.
+#[derive(Clone, Copy)]
+enum Range {
+    /// (lo, hi) with open/closed ends: `lo_closed`, `hi_closed`; `None` = unbounded.
+    Between {
+        lo: Option<(f64, bool)>,
+        hi: Option<(f64, bool)>,
+    },
+}
+
+const POSITIVE: Range = Range::Between {
+    lo: Some((0.0, false)),
+    hi: None,
+};
+const NON_NEGATIVE: Range = Range::Between {
+    lo: Some((0.0, true)),
+    hi: None,
+};
+
+fn between(lo: f64, lo_closed: bool, hi: f64, hi_closed: bool) -> Range {
+    Range::Between {
+        lo: Some((lo, lo_closed)),
+        hi: Some((hi, hi_closed)),
+    }
+}
+
+impl Range {
+    fn contains(self, x: f64) -> bool {
+        let Range::Between { lo, hi } = self;
+        let lo_ok = match lo {
+            None => true,
+            Some((l, true)) => x >= l,
+            Some((l, false)) => x > l,
+        };
+        let hi_ok = match hi {
+            None => true,
+            Some((h, true)) => x <= h,
+            Some((h, false)) => x < h,
+        };
+        lo_ok && hi_ok
+    }
+
+    fn describe(self) -> String {
+        let Range::Between { lo, hi } = self;
+        match (lo, hi) {
+            (Some((0.0, false)), None) => "must be > 0".to_string(),
+            (Some((0.0, true)), None) => "must be >= 0".to_string(),
+            (Some((l, false)), None) => format!("must be > {l:?}"),
+            (Some((l, true)), None) => format!("must be >= {l:?}"),
+            (None, Some((h, false))) => format!("must be < {h:?}"),
+            (None, Some((h, true))) => format!("must be <= {h:?}"),
+            (Some((l, lc)), Some((h, hc))) => format!(
+                "must be in {}{}, {}{}",
+                if lc { '[' } else { '(' },
+                fmt_num(l),
+                fmt_num(h),
+                if hc { ']' } else { ')' }
+            ),
+            (None, None) => String::new(),
+        }
+    }
+}
+
+/// Short number formatting for messages: `1` not `1.0`, `1e-9` kept short.
+fn fmt_num(x: f64) -> String {
+    if x == x.trunc() && x.abs() < 1e15 {
+        format!("{}", x as i64)
+    } else {
+        format!("{x:?}")
+    }
+}
+
+struct Checker {
+    issues: Vec<Issue>,
+}
+
+impl Checker {
+    fn fail(&mut self, field: &str, message: String) {
+        self.issues.push(Issue {
+            field: field.to_string(),
+            message,
+            non_finite: false,
+        });
+    }
+
+    /// Finite and in `range`; returns whether it passed.
+    fn real(&mut self, field: &str, x: f64, range: Range) -> bool {
+        if !x.is_finite() {
+            self.fail(field, format!("must be a finite number, got {x:?}"));
+            if let Some(issue) = self.issues.last_mut() {
+                issue.non_finite = true;
+            }
+            false
+        } else if !range.contains(x) {
+            self.fail(field, format!("{}, got {}", range.describe(), fmt_num(x)));
+            false
+        } else {
+            true
+        }
+    }
+
+    fn int_at_least(&mut self, field: &str, x: u64, min: u64) -> bool {
+        if x < min {
+            self.fail(field, format!("must be >= {min}, got {x}"));
+            false
+        } else {
+            true
+        }
+    }
+}
+
+/// All issues of `m`, in field order.
+pub fn check(m: &Manifest) -> Vec<Issue> {
+    let mut c = Checker { issues: Vec::new() };
+
+    // name
+    let n = m.name.chars().count();
+    if n == 0 || n > 64 {
+        c.fail(
+            "name",
+            format!("must be 1 to 64 characters long, got {n} characters"),
+        );
+    } else if let Some(bad) = m
+        .name
+        .chars()
+        .find(|ch| !(ch.is_ascii_alphanumeric() || matches!(ch, '_' | '.' | '-')))
+    {
+        c.fail(
+            "name",
+            format!(
+                "may contain only letters A-Z a-z, digits, '_', '.' and '-' (it becomes a file name), found {bad:?}"
+            ),
+        );
+    } else if m.name == "." || m.name == ".." {
+        c.fail("name", format!("must not be {:?}", m.name));
+    }
+
+    if m.dimension != 2 && m.dimension != 3 {
+        c.fail("dimension", format!("must be 2 or 3, got {}", m.dimension));
+    }
+    let spacing_ok = c.real("spacing_m", m.spacing_m, POSITIVE);
+    c.real("gravity_m_s2", m.gravity_m_s2, NON_NEGATIVE);
+
+    // time
+    c.real("time.end_s", m.time.end_s, POSITIVE);
+    c.real("time.dt_max_s", m.time.dt_max_s, POSITIVE);
+    c.real(
+        "time.courant",
+        m.time.courant,
+        between(0.0, false, 1.0, true),
+    );
+
+    // fluid
+    match &m.fluid {
+        Fluid::Newtonian {
+            density_kg_m3,
+            viscosity_pa_s,
+        } => {
+            c.real("fluid.density_kg_m3", *density_kg_m3, POSITIVE);
+            c.real("fluid.viscosity_pa_s", *viscosity_pa_s, NON_NEGATIVE);
+        }
+    }
+
+    // mps
+    let p = &m.mps;
+    let nd_ok = c.real(
+        "mps.number_density_radius",
+        p.number_density_radius,
+        between(1.0, false, 5.0, true),
+    );
+    let lap_ok = c.real(
+        "mps.laplacian_radius",
+        p.laplacian_radius,
+        between(1.0, false, 5.0, true),
+    );
+    if nd_ok && lap_ok && p.laplacian_radius < p.number_density_radius {
+        c.fail(
+            "mps.laplacian_radius",
+            format!(
+                "must be >= mps.number_density_radius ({}), got {}",
+                fmt_num(p.number_density_radius),
+                fmt_num(p.laplacian_radius)
+            ),
+        );
+    }
+    c.real(
+        "mps.surface_threshold",
+        p.surface_threshold,
+        between(0.0, false, 1.0, false),
+    );
+    c.real(
+        "mps.relaxation_coefficient",
+        p.relaxation_coefficient,
+        between(0.0, false, 1.0, true),
+    );
+    c.real(
+        "mps.compressibility_1_pa",
+        p.compressibility_1_pa,
+        NON_NEGATIVE,
+    );
+    c.real(
+        "mps.collision_distance",
+        p.collision_distance,
+        between(0.0, true, 1.0, false),
+    );
+    c.real(
+        "mps.collision_restitution",
+        p.collision_restitution,
+        between(0.0, true, 1.0, true),
+    );
+    c.real(
+        "mps.ppe_tolerance",
+        p.ppe_tolerance,
+        between(0.0, false, 1e-2, true),
+    );
+    c.int_at_least("mps.ppe_max_iterations", p.ppe_max_iterations.into(), 1);
+    let walls_ok = c.int_at_least("mps.wall_layers", p.wall_layers.into(), 1);
+    if walls_ok && lap_ok {
+        // A fluid particle one spacing away from the wall must see wall or dummy particles
+        // at every distance k * spacing_m < laplacian_radius * spacing_m, k = 1, 2, ...
+        let needed = p.laplacian_radius.ceil() - 1.0;
+        let have = u64::from(p.wall_layers) + u64::from(p.dummy_layers);
+        if (have as f64) < needed {
+            c.fail(
+                "mps.dummy_layers",
+                format!(
+                    "mps.wall_layers + mps.dummy_layers must be >= ceil(mps.laplacian_radius) - 1 = {}, got {} + {} = {have}",
+                    fmt_num(needed),
+                    p.wall_layers,
+                    p.dummy_layers
+                ),
+            );
+        }
+    }
+
+    // scene
+    match &m.scene {
+        Scene::DamBreak {
+            tank_width_m,
+            tank_height_m,
+            tank_depth_m,
+            column_width_m,
+            column_height_m,
+        } => {
+            let dims = [
+                ("scene.tank_width_m", *tank_width_m),
+                ("scene.tank_height_m", *tank_height_m),
+                ("scene.tank_depth_m", *tank_depth_m),
+                ("scene.column_width_m", *column_width_m),
+                ("scene.column_height_m", *column_height_m),
+            ];
+            let mut all_ok = true;
+            for (field, x) in dims {
+                all_ok &= c.real(field, x, POSITIVE);
+            }
+            if all_ok {
+                if column_width_m > tank_width_m {
+                    c.fail(
+                        "scene.column_width_m",
+                        format!(
+                            "must be <= scene.tank_width_m ({}), got {}",
+                            fmt_num(*tank_width_m),
+                            fmt_num(*column_width_m)
+                        ),
+                    );
+                }
+                if column_height_m > tank_height_m {
+                    c.fail(
+                        "scene.column_height_m",
+                        format!(
+                            "must be <= scene.tank_height_m ({}), got {}",
+                            fmt_num(*tank_height_m),
+                            fmt_num(*column_height_m)
+                        ),
+                    );
+                }
+                if spacing_ok {
+                    for (field, x) in dims {
+                        // The depth is used in 3D only.
+                        if field == "scene.tank_depth_m" && m.dimension != 3 {
+                            continue;
+                        }
+                        if x < 2.0 * m.spacing_m {
+                            c.fail(
+                                field,
+                                format!(
+                                    "must be >= 2 * spacing_m = {}, got {}",
+                                    fmt_num(2.0 * m.spacing_m),
+                                    fmt_num(x)
+                                ),
+                            );
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    // output
+    let o = &m.output;
+    c.real(
+        "output.checkpoint_interval_s",
+        o.checkpoint_interval_s,
+        POSITIVE,
+    );
+    c.real("output.cloud_interval_s", o.cloud_interval_s, POSITIVE);
+    c.real(
+        "output.diagnostics_interval_s",
+        o.diagnostics_interval_s,
+        POSITIVE,
+    );
+
+    // stop
+    c.int_at_least("stop.max_steps", m.stop.max_steps, 1);
+    c.real("stop.max_speed_m_s", m.stop.max_speed_m_s, POSITIVE);
+
+    c.issues
+}
