@@ -22,7 +22,12 @@ pub fn state_sha256(msg: &StateCheckpoint) -> String {
     h.update(canonical_bits(msg.dt_s).to_le_bytes());
     h.update(msg.dimension.to_le_bytes());
     h.update((msg.kind.len() as u64).to_le_bytes());
-    for v in msg.position_m.iter().chain(&msg.velocity_m_s).chain(&msg.pressure_pa) {
+    for v in msg
+        .position_m
+        .iter()
+        .chain(&msg.velocity_m_s)
+        .chain(&msg.pressure_pa)
+    {
         h.update(canonical_bits(*v).to_le_bytes());
     }
     for k in &msg.kind {
@@ -35,7 +40,11 @@ pub fn state_sha256(msg: &StateCheckpoint) -> String {
 /// run would take next.
 pub fn to_message<const D: usize>(index: u32, solver: &Solver<D>, dt_s: f64) -> StateCheckpoint {
     let p = &solver.particles;
-    let flat = |v: &[Vector<D>]| v.iter().flat_map(|x| x.iter().copied()).collect::<Vec<f64>>();
+    let flat = |v: &[Vector<D>]| {
+        v.iter()
+            .flat_map(|x| x.iter().copied())
+            .collect::<Vec<f64>>()
+    };
     let mut msg = StateCheckpoint {
         index,
         step: solver.step,
@@ -54,16 +63,37 @@ pub fn to_message<const D: usize>(index: u32, solver: &Solver<D>, dt_s: f64) -> 
 }
 
 /// Particles of a checkpoint message (for resume and replay).
-pub fn particles_from_message<const D: usize>(msg: &StateCheckpoint) -> Result<Particles<D>, String> {
+pub fn particles_from_message<const D: usize>(
+    msg: &StateCheckpoint,
+) -> Result<Particles<D>, String> {
     let n = msg.kind.len();
-    if msg.dimension as usize != D || msg.position_m.len() != n * D || msg.velocity_m_s.len() != n * D || msg.pressure_pa.len() != n {
-        return Err(format!("checkpoint {} has inconsistent array lengths for dimension {}", msg.index, msg.dimension));
+    if msg.dimension as usize != D
+        || msg.position_m.len() != n * D
+        || msg.velocity_m_s.len() != n * D
+        || msg.pressure_pa.len() != n
+    {
+        return Err(format!(
+            "checkpoint {} has inconsistent array lengths for dimension {}",
+            msg.index, msg.dimension
+        ));
     }
-    let vecs = |v: &[f64]| v.chunks_exact(D).map(Vector::<D>::from_column_slice).collect::<Vec<_>>();
+    let vecs = |v: &[f64]| {
+        v.chunks_exact(D)
+            .map(Vector::<D>::from_column_slice)
+            .collect::<Vec<_>>()
+    };
     let kind = msg
         .kind
         .iter()
-        .map(|&k| ParticleKind::from_u32(k).ok_or_else(|| format!("checkpoint {}: unknown particle kind {k}", msg.index)))
+        .map(|&k| {
+            ParticleKind::from_u32(k)
+                .ok_or_else(|| format!("checkpoint {}: unknown particle kind {k}", msg.index))
+        })
         .collect::<Result<Vec<_>, _>>()?;
-    Ok(Particles { position_m: vecs(&msg.position_m), velocity_m_s: vecs(&msg.velocity_m_s), pressure_pa: msg.pressure_pa.clone(), kind })
+    Ok(Particles {
+        position_m: vecs(&msg.position_m),
+        velocity_m_s: vecs(&msg.velocity_m_s),
+        pressure_pa: msg.pressure_pa.clone(),
+        kind,
+    })
 }

@@ -6,7 +6,7 @@ use crate::checkpoint;
 use crate::manifest::{Fluid, Manifest, Resolved, Scene as SceneSpec};
 use crate::mps::{ParticleKind, Particles, Solver, SolverConfig};
 use crate::proto::mps::v1::{CheckpointHash, Diagnostics, Summary};
-use crate::record::{Outcome, Recorder, RecordError, RunHeader, point_cloud};
+use crate::record::{Outcome, RecordError, Recorder, RunHeader, point_cloud};
 use crate::scene::{self, Scene};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -165,7 +165,10 @@ struct Schedule {
 
 impl Schedule {
     fn new(interval_s: f64) -> Self {
-        Self { interval_s, next: 0 }
+        Self {
+            interval_s,
+            next: 0,
+        }
     }
     fn due(&mut self, time_s: f64) -> bool {
         if time_s >= self.next as f64 * self.interval_s {
@@ -271,7 +274,8 @@ fn run_in<const D: usize>(
     loop {
         let t = solver.time_s;
         if diag_schedule.due(t) {
-            recorder.write_diagnostics(time_ns(t), &diagnostics(m, &solver, dt_s, report.as_ref()))?;
+            recorder
+                .write_diagnostics(time_ns(t), &diagnostics(m, &solver, dt_s, report.as_ref()))?;
         }
         if cloud_schedule.due(t) {
             recorder.write_cloud(time_ns(t), &cloud(&solver))?;

@@ -4,7 +4,8 @@ use mps_runner::record::{Outcome, read_run};
 
 /// Martin & Moyce (1952), a = 2.25 in, n^2 = 2: (T, Z) with T = t sqrt(2g/a), Z = z/a.
 fn martin_moyce() -> Vec<(f64, f64)> {
-    let text = std::fs::read_to_string(common::root().join("tests/data/dam_break_front.csv")).unwrap();
+    let text =
+        std::fs::read_to_string(common::root().join("tests/data/dam_break_front.csv")).unwrap();
     text.lines()
         .filter(|l| l.starts_with("martin_moyce"))
         .map(|l| {
@@ -16,10 +17,13 @@ fn martin_moyce() -> Vec<(f64, f64)> {
 
 /// Linear interpolation of a monotone-in-x table.
 fn interpolate(table: &[(f64, f64)], x: f64) -> Option<f64> {
-    table.windows(2).find(|w| w[0].0 <= x && x <= w[1].0).map(|w| {
-        let s = (x - w[0].0) / (w[1].0 - w[0].0);
-        w[0].1 + s * (w[1].1 - w[0].1)
-    })
+    table
+        .windows(2)
+        .find(|w| w[0].0 <= x && x <= w[1].0)
+        .map(|w| {
+            let s = (x - w[0].0) / (w[1].0 - w[0].0);
+            w[0].1 + s * (w[1].1 - w[0].1)
+        })
 }
 
 #[test]
@@ -28,15 +32,26 @@ fn surge_front_follows_martin_and_moyce() {
     let spacing_m = 0.0125;
     let resolved = common::resolve(
         "dam_break_2d.yaml",
-        &["spacing_m=0.0125", "time.end_s=0.4", "output.diagnostics_interval_s=0.005"],
+        &[
+            "spacing_m=0.0125",
+            "time.end_s=0.4",
+            "output.diagnostics_interval_s=0.005",
+        ],
     );
     let m = &resolved.manifest;
     let a_m = 0.25;
-    assert!(matches!(&m.scene, mps_runner::manifest::Scene::DamBreak { column_width_m, column_height_m, .. }
-        if *column_width_m == a_m && *column_height_m == 2.0 * a_m));
+    assert!(
+        matches!(&m.scene, mps_runner::manifest::Scene::DamBreak { column_width_m, column_height_m, .. }
+        if *column_width_m == a_m && *column_height_m == 2.0 * a_m)
+    );
     let dir = tempfile::tempdir().unwrap();
     let result = common::run_in(&resolved, dir.path(), 2);
-    assert_eq!(result.outcome, Outcome::Completed, "{}", result.summary.reason);
+    assert_eq!(
+        result.outcome,
+        Outcome::Completed,
+        "{}",
+        result.summary.reason
+    );
 
     let run = read_run(&result.path).unwrap();
     let time_scale = (2.0 * m.gravity_m_s2 / a_m).sqrt();
@@ -46,7 +61,10 @@ fn surge_front_follows_martin_and_moyce() {
         .iter()
         .map(|d| (d.time_s * time_scale, d.metrics["front_position_m"] / a_m))
         .collect();
-    assert!((sim[0].1 - 1.0).abs() < 1e-12, "front starts at the column width");
+    assert!(
+        (sim[0].1 - 1.0).abs() < 1e-12,
+        "front starts at the column width"
+    );
 
     // The gate of the experiment takes time to clear, so its time origin lags the ideal
     // instantaneous release by an unknown constant: compare after the best constant shift
@@ -66,16 +84,27 @@ fn surge_front_follows_martin_and_moyce() {
         .min_by(|a, b| a.1.total_cmp(&b.1))
         .unwrap();
     let raw_error = error_for(0.0);
-    eprintln!("raw max error {raw_error:.3}, best shift dT = {best_shift:.3}, error then {best_error:.3}");
+    eprintln!(
+        "raw max error {raw_error:.3}, best shift dT = {best_shift:.3}, error then {best_error:.3}"
+    );
     for &(t, z) in &mm {
-        eprintln!("T = {t:.3}: Martin & Moyce Z = {z:.3}, MPS Z = {:.3} (shifted {:.3})",
-            interpolate(&sim, t).unwrap_or(f64::NAN), interpolate(&sim, t - best_shift).unwrap_or(f64::NAN));
+        eprintln!(
+            "T = {t:.3}: Martin & Moyce Z = {z:.3}, MPS Z = {:.3} (shifted {:.3})",
+            interpolate(&sim, t).unwrap_or(f64::NAN),
+            interpolate(&sim, t - best_shift).unwrap_or(f64::NAN)
+        );
     }
     // Tolerance: the scatter between the two published experiments (about 5 %) plus the
     // front's resolution, half a spacing over the smallest compared Z.
     let tolerance = 0.05 + 0.5 * spacing_m / (a_m * mm[0].1);
-    assert!(best_error < tolerance, "front off by {best_error:.3} (> {tolerance:.3}) after shift {best_shift}");
-    assert!(best_shift <= 0.4, "time shift {best_shift} too large to be the gate's delay");
+    assert!(
+        best_error < tolerance,
+        "front off by {best_error:.3} (> {tolerance:.3}) after shift {best_shift}"
+    );
+    assert!(
+        best_shift <= 0.4,
+        "time shift {best_shift} too large to be the gate's delay"
+    );
 
     // Surge speed (independent of the time origin): slope dZ/dT between Z = 1.5 and 3.5.
     let slope = |table: &[(f64, f64)]| {
@@ -88,5 +117,8 @@ fn surge_front_follows_martin_and_moyce() {
     let sim_rising: Vec<(f64, f64)> = sim.iter().copied().take_while(|p| p.1 < 3.9).collect();
     let (s_sim, s_mm) = (slope(&sim_rising), slope(&martin_moyce()));
     eprintln!("surge speed dZ/dT: MPS {s_sim:.3}, Martin & Moyce {s_mm:.3}");
-    assert!(((s_sim - s_mm) / s_mm).abs() < 0.1, "surge speed {s_sim} vs {s_mm}");
+    assert!(
+        ((s_sim - s_mm) / s_mm).abs() < 0.1,
+        "surge speed {s_sim} vs {s_mm}"
+    );
 }

@@ -6,15 +6,36 @@ fn checkpoint_hashes(threads: usize, sets: &[&str]) -> (Vec<String>, Vec<Vec<u64
     let resolved = common::resolve("smoke_2d.yaml", sets);
     let dir = tempfile::tempdir().unwrap();
     let result = common::run_in(&resolved, dir.path(), threads);
-    assert_eq!(result.outcome, Outcome::Completed, "{}", result.summary.reason);
+    assert_eq!(
+        result.outcome,
+        Outcome::Completed,
+        "{}",
+        result.summary.reason
+    );
     let run = read_run(&result.path).unwrap();
-    let hashes: Vec<String> = result.summary.checkpoints.iter().map(|c| c.state_sha256.clone()).collect();
+    let hashes: Vec<String> = result
+        .summary
+        .checkpoints
+        .iter()
+        .map(|c| c.state_sha256.clone())
+        .collect();
     assert!(hashes.len() >= 3, "smoke run must log several checkpoints");
     // The summary's hashes are the hashes of the logged states, recomputed from their bits.
     for (state, h) in run.states.iter().zip(&hashes) {
         assert_eq!(&mps_runner::checkpoint::state_sha256(state), h);
     }
-    let bits = run.states.iter().map(|s| s.position_m.iter().chain(&s.velocity_m_s).chain(&s.pressure_pa).map(|v| v.to_bits()).collect()).collect();
+    let bits = run
+        .states
+        .iter()
+        .map(|s| {
+            s.position_m
+                .iter()
+                .chain(&s.velocity_m_s)
+                .chain(&s.pressure_pa)
+                .map(|v| v.to_bits())
+                .collect()
+        })
+        .collect();
     (hashes, bits)
 }
 

@@ -85,7 +85,9 @@ fn main() -> ExitCode {
 
 fn run_command(args: RunArgs) -> ExitCode {
     let Some(path) = args.manifest else {
-        eprintln!("error: no manifest given (usage: runner <MANIFEST> [--out DIR] [--set KEY=VALUE]... [--threads N])");
+        eprintln!(
+            "error: no manifest given (usage: runner <MANIFEST> [--out DIR] [--set KEY=VALUE]... [--threads N])"
+        );
         return ExitCode::from(EXIT_BAD_INPUT);
     };
     if args.threads == Some(0) {
