@@ -212,9 +212,9 @@ fn diagnostics<const D: usize>(
 
 fn cloud<const D: usize>(solver: &Solver<D>) -> crate::proto::foxglove::PointCloud {
     let p = &solver.particles;
-    // Dummy particles are left out of the view: they only pad the walls.
+    // Dummies only pad the walls and ghosts have left the domain: neither is shown.
     let shown: Vec<usize> = (0..p.len())
-        .filter(|&i| p.kind[i] != ParticleKind::Dummy)
+        .filter(|&i| matches!(p.kind[i], ParticleKind::Fluid | ParticleKind::Wall))
         .collect();
     let positions: Vec<f64> = shown
         .iter()
@@ -344,6 +344,10 @@ fn run_in<const D: usize>(
     let mut metrics: BTreeMap<String, f64> = experiment_metrics(m, p);
     metrics.insert("particle_count".into(), p.len() as f64);
     metrics.insert("fluid_particle_count".into(), p.fluid_count() as f64);
+    metrics.insert(
+        "ghost_particle_count".into(),
+        p.count(ParticleKind::Ghost) as f64,
+    );
     metrics.insert("steps".into(), solver.step as f64);
     metrics.insert("simulated_time_s".into(), solver.time_s);
     let reason = match &outcome {

@@ -21,8 +21,18 @@ impl Neighbours {
         &self.indices[self.offsets[i]..self.offsets[i + 1]]
     }
 
-    /// All j != i with |r_j - r_i| < cutoff_m.
+    /// All j != i with |r_j - r_i| < cutoff_m, for every particle.
     pub fn build<const D: usize>(positions: &[Vector<D>], cutoff_m: f64) -> Self {
+        Self::build_active(positions, cutoff_m, |_| true)
+    }
+
+    /// As [`Neighbours::build`], but particles with `active(i) == false` neither have nor are
+    /// neighbours.
+    pub fn build_active<const D: usize>(
+        positions: &[Vector<D>],
+        cutoff_m: f64,
+        active: impl Fn(usize) -> bool + Sync,
+    ) -> Self {
         let n = positions.len();
         if n == 0 {
             return Self {
@@ -81,6 +91,10 @@ impl Neighbours {
                 let mut list = Vec::with_capacity(range.len() * 32);
                 for i in range {
                     let before = list.len();
+                    if !active(i) {
+                        counts.push(0);
+                        continue;
+                    }
                     let pi = positions[i];
                     let ci = cell_of(&pi);
                     // Visit the 3^D surrounding cells in a fixed (flat) order.

@@ -13,6 +13,9 @@ pub enum ParticleKind {
     Wall = 1,
     /// Dummy layers behind the wall: count in the number density only.
     Dummy = 2,
+    /// Fluid that left the domain (splashed out of the tank): frozen where it left and
+    /// excluded from every interaction, as in common MPS codes.
+    Ghost = 3,
 }
 
 impl ParticleKind {
@@ -21,13 +24,19 @@ impl ParticleKind {
             0 => Some(Self::Fluid),
             1 => Some(Self::Wall),
             2 => Some(Self::Dummy),
+            3 => Some(Self::Ghost),
             _ => None,
         }
     }
     /// Has a pressure of its own (fluid and wall particles).
     #[inline]
     pub fn has_pressure(self) -> bool {
-        !matches!(self, Self::Dummy)
+        matches!(self, Self::Fluid | Self::Wall)
+    }
+    /// Takes part in the simulation at all (everything but ghosts).
+    #[inline]
+    pub fn is_active(self) -> bool {
+        !matches!(self, Self::Ghost)
     }
 }
 
@@ -63,10 +72,10 @@ impl<const D: usize> Particles<D> {
         self.pressure_pa.push(0.0);
         self.kind.push(kind);
     }
+    pub fn count(&self, kind: ParticleKind) -> usize {
+        self.kind.iter().filter(|k| **k == kind).count()
+    }
     pub fn fluid_count(&self) -> usize {
-        self.kind
-            .iter()
-            .filter(|k| **k == ParticleKind::Fluid)
-            .count()
+        self.count(ParticleKind::Fluid)
     }
 }

@@ -49,8 +49,6 @@ pub enum StepError {
         limit_m_s: f64,
         step: u64,
     },
-    #[error("fluid particle {particle} left the domain (step {step})")]
-    LeftDomain { particle: usize, step: u64 },
     #[error(
         "pressure solve did not converge: relative residual {residual:.3e} after {iterations} iterations (step {step})"
     )]
@@ -137,7 +135,7 @@ impl<const D: usize> Solver<D> {
 
         // (1) Viscosity and gravity give the predicted velocity u* (explicit Newtonian term
         // nu <lap u>, eq. 4, walls at rest give no-slip), then (2) r* = r + dt u*.
-        self.neighbours = Neighbours::build(&self.particles.position_m, c.radius_lap_m);
+        self.rebuild_neighbours();
         let nu = c.viscosity_pa_s / rho;
         let g = self.gravity();
         {
@@ -176,7 +174,7 @@ impl<const D: usize> Solver<D> {
         }
 
         // Neighbours at the predicted positions, used by every later stage of the step.
-        self.neighbours = Neighbours::build(&self.particles.position_m, c.radius_lap_m);
+        self.rebuild_neighbours();
         self.collide(dt_s);
 
         // (3) Number density n*, free surface, pressure Poisson equation.
@@ -204,6 +202,14 @@ impl<const D: usize> Solver<D> {
             ppe,
             surface_count,
         })
+    }
+
+    /// Neighbour lists of the active particles at the current positions.
+    fn rebuild_neighbours(&mut self) {
+        let kind = &self.particles.kind;
+        self.neighbours = Neighbours::build_active(&self.particles.position_m, self.config.radius_lap_m, |i| {
+            kind[i].is_active()
+        });
     }
 
     /// (5) Collision model: fluid pairs closer than the collision distance that approach each
@@ -393,10 +399,11 @@ impl<const D: usize> Solver<D> {
         }
     }
 
-    /// Blow-up guards after a step: finite state, speed limit, domain box.
-    fn check_state(&self) -> Result<(), StepError> {
+    /// Blow-up guards after a step (finite state, speed limit); fluid that left the domain
+    /// box becomes a ghost, at rest where it left.
+    fn check_state(&mut self) -> Result<(), StepError> {
         let c = &self.config;
-        let p = &self.particles;
+        let p = &mut self.particles;
         for i in 0..p.len() {
             if p.kind[i] != ParticleKind::Fluid {
                 continue;
@@ -418,10 +425,9 @@ impl<const D: usize> Solver<D> {
                 });
             }
             if (0..D).any(|a| x[a] < c.domain_min_m[a] || x[a] > c.domain_max_m[a]) {
-                return Err(StepError::LeftDomain {
-                    particle: i,
-                    step: self.step,
-                });
+                p.kind[i] = ParticleKind::Ghost;
+                p.velocity_m_s[i] = Vector::<D>::zeros();
+                p.pressure_pa[i] = 0.0;
             }
         }
         Ok(())

@@ -61,7 +61,7 @@ pub fn build<const D: usize>(
             particles.push(centre(idx, spacing_m), kind);
         }
     });
-    // Fluid may splash well above the walls; anything beyond one tank size away has blown up.
+    // Fluid may splash over the walls; beyond one tank size away it becomes a ghost.
     let extent = Vector::<D>::from_fn(|a, _| tank[a] as f64 * spacing_m);
     Scene {
         particles,
