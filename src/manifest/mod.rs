@@ -14,7 +14,7 @@
 pub mod canonical;
 mod error;
 mod locate;
-pub mod overrides;
+mod overrides;
 mod types;
 pub mod validate;
 
