@@ -14,7 +14,7 @@
 pub mod canonical;
 mod error;
 mod locate;
-pub mod overrides;
+mod overrides;
 mod types;
 pub mod validate;
 
@@ -297,13 +297,21 @@ fn describe(e: &serde_saphyr::Error, map: &SourceMap) -> Described {
         }
         E::SerdeUnknownVariant {
             variant, expected, ..
-        } => (
-            at,
-            format!(
-                "unknown variant `{variant}`, expected one of {}",
-                list(expected)
-            ),
-        ),
+        } => {
+            // Reported at the tag's key: point at its value.
+            if let Some(entry) = at.as_deref().and_then(|p| map.entries.get(p))
+                && entry.scalar.is_some()
+            {
+                pos = Some(entry.value.0);
+            }
+            (
+                at,
+                format!(
+                    "unknown variant `{variant}`, expected one of {}",
+                    list(expected)
+                ),
+            )
+        }
         E::SerdeInvalidType { unexpected, .. } | E::SerdeInvalidValue { unexpected, .. } => {
             // Inside an internally tagged enum the location is the enum's key: look for the
             // offending scalar below it.
