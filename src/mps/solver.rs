@@ -207,9 +207,10 @@ impl<const D: usize> Solver<D> {
     /// Neighbour lists of the active particles at the current positions.
     fn rebuild_neighbours(&mut self) {
         let kind = &self.particles.kind;
-        self.neighbours = Neighbours::build_active(&self.particles.position_m, self.config.radius_lap_m, |i| {
-            kind[i].is_active()
-        });
+        self.neighbours =
+            Neighbours::build_active(&self.particles.position_m, self.config.radius_lap_m, |i| {
+                kind[i].is_active()
+            });
     }
 
     /// (5) Collision model: fluid pairs closer than the collision distance that approach each
