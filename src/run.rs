@@ -4,7 +4,7 @@
 //! schedule, diagnostics, checkpoints, stop conditions, outcome).
 use crate::checkpoint;
 use crate::manifest::{Fluid, Manifest, Resolved, Scene as SceneSpec};
-use crate::mps::{ParticleKind, Particles, Solver, SolverConfig};
+use crate::mps::{ParticleKind, Particles, Rheology, Solver, SolverConfig};
 use crate::proto::mps::v1::{CheckpointHash, Diagnostics, Summary};
 use crate::record::{Outcome, RecordError, Recorder, RunHeader, point_cloud};
 use crate::scene::{self, Scene};
@@ -102,20 +102,82 @@ pub fn build_scene<const D: usize>(m: &Manifest) -> Scene<D> {
             m.mps.wall_layers,
             m.mps.dummy_layers,
         ),
+        SceneSpec::LFlow { .. } => scene::l_flow::build::<D>(
+            &l_flow_spec(&m.scene).expect("l_flow scene"),
+            m.spacing_m,
+            m.mps.wall_layers,
+            m.mps.dummy_layers,
+        ),
+    }
+}
+
+fn l_flow_spec(s: &SceneSpec) -> Option<scene::l_flow::LFlow> {
+    match *s {
+        SceneSpec::LFlow {
+            vertical_width_m,
+            vertical_height_m,
+            channel_length_m,
+            channel_height_m,
+            fill_height_m,
+            depth_m,
+        } => Some(scene::l_flow::LFlow {
+            vertical_width_m,
+            vertical_height_m,
+            channel_length_m,
+            channel_height_m,
+            fill_height_m,
+            depth_m,
+        }),
+        _ => None,
+    }
+}
+
+/// The rheology a manifest's fluid section describes, and whether eq. 8's term is on.
+pub fn rheology(fluid: &Fluid) -> (Rheology, bool) {
+    match *fluid {
+        Fluid::Newtonian { viscosity_pa_s, .. } => (Rheology::Newtonian { viscosity_pa_s }, false),
+        Fluid::Bingham {
+            plastic_viscosity_pa_s,
+            yield_stress_pa,
+            critical_strain_rate_1_s,
+            stress_gradient_term,
+            ..
+        } => (
+            Rheology::seed000(
+                plastic_viscosity_pa_s,
+                yield_stress_pa,
+                critical_strain_rate_1_s,
+            ),
+            stress_gradient_term,
+        ),
+        Fluid::BiViscosity {
+            plastic_viscosity_pa_s,
+            yield_stress_pa,
+            rigid_viscosity_pa_s,
+            stress_gradient_term,
+            ..
+        } => (
+            Rheology::bi_viscosity(
+                plastic_viscosity_pa_s,
+                yield_stress_pa,
+                rigid_viscosity_pa_s,
+            ),
+            stress_gradient_term,
+        ),
     }
 }
 
 /// Solver parameters from the manifest (radii and distances scaled by the spacing).
 pub fn solver_config<const D: usize>(m: &Manifest, scene: &Scene<D>) -> SolverConfig<D> {
-    let Fluid::Newtonian {
-        density_kg_m3,
-        viscosity_pa_s,
-    } = m.fluid.clone();
+    let (rheology, stress_gradient_term) = rheology(&m.fluid);
     let l0 = m.spacing_m;
     SolverConfig {
         spacing_m: l0,
-        density_kg_m3,
-        viscosity_pa_s,
+        density_kg_m3: m.fluid.density_kg_m3(),
+        rheology,
+        stress_gradient_term,
+        viscosity_tolerance: m.mps.viscosity_tolerance,
+        viscosity_max_iterations: m.mps.viscosity_max_iterations,
         gravity_m_s2: m.gravity_m_s2,
         radius_n_m: m.mps.number_density_radius * l0,
         radius_lap_m: m.mps.laplacian_radius * l0,
@@ -140,13 +202,15 @@ pub fn experiment_metrics<const D: usize>(
     particles: &Particles<D>,
 ) -> BTreeMap<String, f64> {
     let mut out = BTreeMap::new();
-    match &m.scene {
-        SceneSpec::DamBreak { .. } => {
-            out.insert(
-                "front_position_m".to_string(),
-                scene::dam_break::front_position_m(particles, m.spacing_m),
-            );
-        }
+    out.insert(
+        "front_position_m".to_string(),
+        scene::front_position_m(particles, m.spacing_m),
+    );
+    if let Some(spec) = l_flow_spec(&m.scene) {
+        out.insert(
+            "l_flow_value_m".to_string(),
+            scene::l_flow::l_flow_value_m(particles, &spec, m.spacing_m),
+        );
     }
     out
 }
@@ -206,6 +270,9 @@ fn diagnostics<const D: usize>(
         ppe_relative_residual: report.map_or(0.0, |r| r.ppe.relative_residual),
         surface_particle_count: report.map_or(0, |r| r.surface_count as u32),
         fluid_particle_count: p.fluid_count() as u32,
+        viscosity_iterations: report.map_or(0, |r| r.viscosity.iterations),
+        viscosity_relative_residual: report.map_or(0.0, |r| r.viscosity.relative_residual),
+        non_flowing_fraction: report.map_or(0.0, |r| r.non_flowing_fraction),
         metrics: experiment_metrics(m, p).into_iter().collect(),
     }
 }

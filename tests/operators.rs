@@ -175,6 +175,7 @@ fn pcg_meets_its_residual_tolerance() {
         .fold(0.0, f64::max);
     assert!(err < 1e-6, "max error {err}");
     // An iteration cap below what the system needs is reported as not converged.
+    x.iter_mut().for_each(|v| *v = 0.0);
     let capped = solve_pcg(&a, &b, &mut x, tol, 5);
     assert!(!capped.converged && capped.iterations == 5);
 }

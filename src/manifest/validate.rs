@@ -175,6 +175,63 @@ pub fn check(m: &Manifest) -> Vec<Issue> {
             c.real("fluid.density_kg_m3", *density_kg_m3, POSITIVE);
             c.real("fluid.viscosity_pa_s", *viscosity_pa_s, NON_NEGATIVE);
         }
+        Fluid::Bingham {
+            density_kg_m3,
+            plastic_viscosity_pa_s,
+            yield_stress_pa,
+            critical_strain_rate_1_s,
+            ..
+        } => {
+            c.real("fluid.density_kg_m3", *density_kg_m3, POSITIVE);
+            c.real(
+                "fluid.plastic_viscosity_pa_s",
+                *plastic_viscosity_pa_s,
+                NON_NEGATIVE,
+            );
+            c.real("fluid.yield_stress_pa", *yield_stress_pa, NON_NEGATIVE);
+            c.real(
+                "fluid.critical_strain_rate_1_s",
+                *critical_strain_rate_1_s,
+                POSITIVE,
+            );
+            if *plastic_viscosity_pa_s == 0.0 && *yield_stress_pa == 0.0 {
+                c.fail(
+                    "fluid.plastic_viscosity_pa_s",
+                    "must be > 0 when fluid.yield_stress_pa is 0".to_string(),
+                );
+            }
+        }
+        Fluid::BiViscosity {
+            density_kg_m3,
+            plastic_viscosity_pa_s,
+            yield_stress_pa,
+            rigid_viscosity_pa_s,
+            ..
+        } => {
+            c.real("fluid.density_kg_m3", *density_kg_m3, POSITIVE);
+            let mu_p_ok = c.real(
+                "fluid.plastic_viscosity_pa_s",
+                *plastic_viscosity_pa_s,
+                NON_NEGATIVE,
+            );
+            c.real("fluid.yield_stress_pa", *yield_stress_pa, POSITIVE);
+            if c.real(
+                "fluid.rigid_viscosity_pa_s",
+                *rigid_viscosity_pa_s,
+                POSITIVE,
+            ) && mu_p_ok
+                && rigid_viscosity_pa_s <= plastic_viscosity_pa_s
+            {
+                c.fail(
+                    "fluid.rigid_viscosity_pa_s",
+                    format!(
+                        "must be > fluid.plastic_viscosity_pa_s ({}), got {}",
+                        fmt_num(*plastic_viscosity_pa_s),
+                        fmt_num(*rigid_viscosity_pa_s)
+                    ),
+                );
+            }
+        }
     }
 
     // mps
@@ -230,6 +287,16 @@ pub fn check(m: &Manifest) -> Vec<Issue> {
         between(0.0, false, 1e-2, true),
     );
     c.int_at_least("mps.ppe_max_iterations", p.ppe_max_iterations.into(), 1);
+    c.real(
+        "mps.viscosity_tolerance",
+        p.viscosity_tolerance,
+        between(0.0, false, 1e-2, true),
+    );
+    c.int_at_least(
+        "mps.viscosity_max_iterations",
+        p.viscosity_max_iterations.into(),
+        1,
+    );
     let walls_ok = c.int_at_least("mps.wall_layers", p.wall_layers.into(), 1);
     if walls_ok && lap_ok {
         // A fluid particle one spacing away from the wall must see wall or dummy particles
@@ -251,6 +318,8 @@ pub fn check(m: &Manifest) -> Vec<Issue> {
 
     // scene
     match &m.scene {
+        // Checked below.
+        Scene::LFlow { .. } => {}
         Scene::DamBreak {
             tank_width_m,
             tank_height_m,
@@ -312,6 +381,62 @@ pub fn check(m: &Manifest) -> Vec<Issue> {
         }
     }
 
+    if let Scene::LFlow {
+        vertical_width_m,
+        vertical_height_m,
+        channel_length_m,
+        channel_height_m,
+        fill_height_m,
+        depth_m,
+    } = &m.scene
+    {
+        let mut dims = vec![
+            ("scene.vertical_width_m", *vertical_width_m),
+            ("scene.vertical_height_m", *vertical_height_m),
+            ("scene.channel_length_m", *channel_length_m),
+            ("scene.channel_height_m", *channel_height_m),
+            ("scene.fill_height_m", *fill_height_m),
+        ];
+        if m.dimension == 3 {
+            dims.push(("scene.depth_m", *depth_m));
+        }
+        let mut all_ok = true;
+        for (field, x) in &dims {
+            all_ok &= c.real(field, *x, POSITIVE);
+        }
+        if all_ok {
+            for (field, x) in [
+                ("scene.fill_height_m", *fill_height_m),
+                ("scene.channel_height_m", *channel_height_m),
+            ] {
+                if x > *vertical_height_m {
+                    c.fail(
+                        field,
+                        format!(
+                            "must be <= scene.vertical_height_m ({}), got {}",
+                            fmt_num(*vertical_height_m),
+                            fmt_num(x)
+                        ),
+                    );
+                }
+            }
+            if spacing_ok {
+                for (field, x) in dims {
+                    if x < 2.0 * m.spacing_m {
+                        c.fail(
+                            field,
+                            format!(
+                                "must be >= 2 * spacing_m = {}, got {}",
+                                fmt_num(2.0 * m.spacing_m),
+                                fmt_num(x)
+                            ),
+                        );
+                    }
+                }
+            }
+        }
+    }
+
     // output
     let o = &m.output;
     c.real(
@@ -329,6 +454,19 @@ pub fn check(m: &Manifest) -> Vec<Issue> {
     // stop
     c.int_at_least("stop.max_steps", m.stop.max_steps, 1);
     c.real("stop.max_speed_m_s", m.stop.max_speed_m_s, POSITIVE);
+    if let Some(share) = m.stop.non_flowing_fraction {
+        if c.real(
+            "stop.non_flowing_fraction",
+            share,
+            between(0.0, false, 1.0, true),
+        ) && matches!(m.fluid, Fluid::Newtonian { .. })
+        {
+            c.fail(
+                "stop.non_flowing_fraction",
+                "needs a yield-stress fluid (fluid.model bingham or bi_viscosity); a Newtonian fluid always flows".to_string(),
+            );
+        }
+    }
 
     c.issues
 }

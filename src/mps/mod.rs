@@ -5,7 +5,10 @@ pub mod operators;
 pub mod particles;
 pub mod pressure;
 pub mod reduce;
+pub mod rheology;
 pub mod solver;
+pub mod viscosity;
 
 pub use particles::{ParticleKind, Particles, Vector};
+pub use rheology::Rheology;
 pub use solver::{Solver, SolverConfig, StepError, StepReport};

@@ -1,5 +1,5 @@
 //! Pressure Poisson equation: assembly in CSR and a Jacobi-preconditioned conjugate gradient.
-use super::reduce::{dot, sum_by};
+use super::reduce::{MIN_PARALLEL_LEN, dot, sum_by};
 use rayon::prelude::*;
 
 /// Symmetric sparse matrix in compressed rows (diagonal stored separately).
@@ -18,13 +18,16 @@ impl CsrMatrix {
 
     /// y = A x, each row gathered by its own task in a fixed order.
     pub fn multiply(&self, x: &[f64], y: &mut [f64]) {
-        y.par_iter_mut().enumerate().for_each(|(i, yi)| {
-            let mut s = self.diagonal[i] * x[i];
-            for k in self.row_offsets[i]..self.row_offsets[i + 1] {
-                s += self.values[k] * x[self.columns[k] as usize];
-            }
-            *yi = s;
-        });
+        y.par_iter_mut()
+            .with_min_len(MIN_PARALLEL_LEN)
+            .enumerate()
+            .for_each(|(i, yi)| {
+                let mut s = self.diagonal[i] * x[i];
+                for k in self.row_offsets[i]..self.row_offsets[i + 1] {
+                    s += self.values[k] * x[self.columns[k] as usize];
+                }
+                *yi = s;
+            });
     }
 }
 
@@ -38,7 +41,8 @@ pub struct SolveReport {
 }
 
 /// Solves A x = b for symmetric positive definite A with a Jacobi preconditioner, starting from
-/// x = 0. Stops when ||r|| <= tolerance ||b||. All reductions are order-fixed (DESIGN.md 6).
+/// the guess in `x`. Stops when ||r|| <= tolerance ||b||. All reductions are order-fixed
+/// (DESIGN.md 6).
 pub fn solve_pcg(
     a: &CsrMatrix,
     b: &[f64],
@@ -47,22 +51,37 @@ pub fn solve_pcg(
     max_iterations: u32,
 ) -> SolveReport {
     let n = a.rows();
-    x.iter_mut().for_each(|v| *v = 0.0);
     let b_norm = dot(b, b).sqrt();
     if n == 0 || b_norm == 0.0 {
+        x.iter_mut().for_each(|v| *v = 0.0);
         return SolveReport {
             iterations: 0,
             relative_residual: 0.0,
             converged: true,
         };
     }
-    let inv_diag: Vec<f64> = a.diagonal.par_iter().map(|d| 1.0 / d).collect();
-    let mut r = b.to_vec();
-    let mut z: Vec<f64> = r.par_iter().zip(&inv_diag).map(|(r, m)| r * m).collect();
+    let inv_diag: Vec<f64> = a
+        .diagonal
+        .par_iter()
+        .with_min_len(MIN_PARALLEL_LEN)
+        .map(|d| 1.0 / d)
+        .collect();
+    let mut r = vec![0.0; n];
+    a.multiply(x, &mut r);
+    r.par_iter_mut()
+        .with_min_len(MIN_PARALLEL_LEN)
+        .zip(b)
+        .for_each(|(r, b)| *r = b - *r);
+    let mut z: Vec<f64> = r
+        .par_iter()
+        .with_min_len(MIN_PARALLEL_LEN)
+        .zip(&inv_diag)
+        .map(|(r, m)| r * m)
+        .collect();
     let mut p = z.clone();
     let mut ap = vec![0.0; n];
     let mut rz = dot(&r, &z);
-    let mut r_norm = b_norm;
+    let mut r_norm = dot(&r, &r).sqrt();
     let mut iterations = 0;
     while iterations < max_iterations {
         if r_norm <= tolerance * b_norm {
@@ -74,17 +93,23 @@ pub fn solve_pcg(
             break; // not positive definite (or NaN): report as not converged
         }
         let alpha = rz / p_ap;
-        x.par_iter_mut().zip(&p).for_each(|(x, p)| *x += alpha * p);
+        x.par_iter_mut()
+            .with_min_len(MIN_PARALLEL_LEN)
+            .zip(&p)
+            .for_each(|(x, p)| *x += alpha * p);
         r.par_iter_mut()
+            .with_min_len(MIN_PARALLEL_LEN)
             .zip(&ap)
             .for_each(|(r, ap)| *r -= alpha * ap);
         z.par_iter_mut()
-            .zip(r.par_iter().zip(&inv_diag))
+            .with_min_len(MIN_PARALLEL_LEN)
+            .zip(r.par_iter().with_min_len(MIN_PARALLEL_LEN).zip(&inv_diag))
             .for_each(|(z, (r, m))| *z = r * m);
         let rz_new = dot(&r, &z);
         let beta = rz_new / rz;
         rz = rz_new;
         p.par_iter_mut()
+            .with_min_len(MIN_PARALLEL_LEN)
             .zip(&z)
             .for_each(|(p, z)| *p = z + beta * *p);
         r_norm = sum_by(n, |i| r[i] * r[i]).sqrt();

@@ -8,6 +8,14 @@ use rayon::prelude::*;
 /// Elements per partial sum. A constant: never derived from the thread count.
 pub const CHUNK: usize = 1024;
 
+/// Below this many elements a parallel loop is not split further: for small systems the cost
+/// of handing work to threads exceeds the work. (Only scheduling: results never depend on it.)
+pub const MIN_PARALLEL_LEN: usize = 4096;
+
+/// Smallest number of particles handed to one task by the per-particle loops (each particle
+/// gathers over tens of neighbours, so tasks can be smaller than for plain vector loops).
+pub const PARTICLES_PER_TASK: usize = 256;
+
 /// Sum of f(i) for i in 0..n, bitwise identical on any thread count.
 pub fn sum_by<F>(n: usize, f: F) -> f64
 where
@@ -16,6 +24,7 @@ where
     let chunks = n.div_ceil(CHUNK);
     let partial: Vec<f64> = (0..chunks)
         .into_par_iter()
+        .with_min_len(MIN_PARALLEL_LEN / CHUNK)
         .map(|c| {
             let mut s = 0.0;
             for i in c * CHUNK..((c + 1) * CHUNK).min(n) {

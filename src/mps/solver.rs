@@ -1,10 +1,13 @@
 //! One time step of the MPS method (DESIGN.md section 3), stage by stage.
 use super::grid::Neighbours;
 use super::kernel::{RefValues, weight};
-use super::operators::{gradient, laplacian, number_density};
+use super::operators::{gradient, number_density};
 use super::particles::{ParticleKind, Particles, Vector};
 use super::pressure::{CsrMatrix, SolveReport, solve_pcg};
+use super::reduce::PARTICLES_PER_TASK;
 use super::reduce::max_by;
+use super::rheology::Rheology;
+use super::viscosity::{ViscousSettings, predict_velocity};
 use rayon::prelude::*;
 
 /// Physical and numerical parameters of the solver, all in SI units.
@@ -12,7 +15,11 @@ use rayon::prelude::*;
 pub struct SolverConfig<const D: usize> {
     pub spacing_m: f64,
     pub density_kg_m3: f64,
-    pub viscosity_pa_s: f64,
+    pub rheology: Rheology,
+    /// Seed 000 eq. 8 stress-gradient term on/off.
+    pub stress_gradient_term: bool,
+    pub viscosity_tolerance: f64,
+    pub viscosity_max_iterations: u32,
     /// Magnitude of gravity, acting along the last axis towards -inf.
     pub gravity_m_s2: f64,
     pub radius_n_m: f64,
@@ -50,6 +57,14 @@ pub enum StepError {
         step: u64,
     },
     #[error(
+        "viscosity solve did not converge: relative residual {residual:.3e} after {iterations} iterations (step {step})"
+    )]
+    ViscosityNotConverged {
+        residual: f64,
+        iterations: u32,
+        step: u64,
+    },
+    #[error(
         "pressure solve did not converge: relative residual {residual:.3e} after {iterations} iterations (step {step})"
     )]
     PressureNotConverged {
@@ -64,6 +79,9 @@ pub enum StepError {
 pub struct StepReport {
     pub dt_s: f64,
     pub ppe: SolveReport,
+    pub viscosity: SolveReport,
+    /// Share of fluid particles that were non-flowing (Pi <= Pi_c) at the start of the step.
+    pub non_flowing_fraction: f64,
     pub surface_count: usize,
 }
 
@@ -73,6 +91,9 @@ pub struct Solver<const D: usize> {
     pub particles: Particles<D>,
     pub time_s: f64,
     pub step: u64,
+    /// Strain-rate invariant Pi of every particle at the start of the last step (empty before
+    /// the first step). Derived data for output, not part of the state.
+    pub strain_invariant: Vec<f64>,
     neighbours: Neighbours,
 }
 
@@ -86,6 +107,7 @@ impl<const D: usize> Solver<D> {
             particles,
             time_s: 0.0,
             step: 0,
+            strain_invariant: Vec::new(),
             neighbours: Neighbours::default(),
         }
     }
@@ -108,18 +130,14 @@ impl<const D: usize> Solver<D> {
         })
     }
 
-    /// Time step from the CFL condition (Courant number on the largest speed), the explicit
-    /// viscous limit dt <= 0.2 l0^2 / nu, and dt_max; never past `end_time_s`.
+    /// Time step from the CFL condition (Courant number on the largest speed) and dt_max, never
+    /// past `end_time_s`. Viscosity is implicit, so it sets no limit.
     pub fn next_dt_s(&self, end_time_s: f64) -> f64 {
         let c = &self.config;
         let mut dt = c.dt_max_s;
         let speed = self.max_fluid_speed_m_s();
         if speed > 0.0 {
             dt = dt.min(c.courant * c.spacing_m / speed);
-        }
-        let nu = c.viscosity_pa_s / c.density_kg_m3;
-        if nu > 0.0 {
-            dt = dt.min(0.2 * c.spacing_m * c.spacing_m / nu);
         }
         let remaining = end_time_s - self.time_s;
         if remaining < dt {
@@ -128,46 +146,45 @@ impl<const D: usize> Solver<D> {
         dt
     }
 
+    /// Settings of the viscous stage.
+    pub fn viscous_settings(&self) -> ViscousSettings {
+        let c = &self.config;
+        ViscousSettings {
+            rheology: c.rheology,
+            density_kg_m3: c.density_kg_m3,
+            stress_gradient_term: c.stress_gradient_term,
+            tolerance: c.viscosity_tolerance,
+            max_iterations: c.viscosity_max_iterations,
+        }
+    }
+
     /// Advances the state by dt_s.
     pub fn step(&mut self, dt_s: f64) -> Result<StepReport, StepError> {
-        let c = self.config.clone();
-        let rho = c.density_kg_m3;
-
-        // (1) Viscosity and gravity give the predicted velocity u* (explicit Newtonian term
-        // nu <lap u>, eq. 4, walls at rest give no-slip), then (2) r* = r + dt u*.
+        // (1) Viscosity (implicit, with the effective viscosity of the rheology) and gravity
+        // give the predicted velocity u*, then (2) r* = r + dt u*.
         self.rebuild_neighbours();
-        let nu = c.viscosity_pa_s / rho;
-        let g = self.gravity();
+        let stage = predict_velocity(
+            &self.particles,
+            &self.neighbours,
+            &self.refs,
+            &self.viscous_settings(),
+            self.gravity(),
+            dt_s,
+        );
+        if !stage.solve.converged {
+            return Err(StepError::ViscosityNotConverged {
+                residual: stage.solve.relative_residual,
+                iterations: stage.solve.iterations,
+                step: self.step,
+            });
+        }
+        let non_flowing_fraction = self.non_flowing_fraction(&stage.strain_invariant);
+        self.strain_invariant = stage.strain_invariant;
         {
-            let p = &self.particles;
-            let nb = &self.neighbours;
-            let refs = self.refs;
-            let accel: Vec<Vector<D>> = (0..p.len())
-                .into_par_iter()
-                .map(|i| {
-                    if p.kind[i] != ParticleKind::Fluid {
-                        return Vector::<D>::zeros();
-                    }
-                    let visc = if nu > 0.0 {
-                        laplacian::<D, D>(
-                            &p.position_m,
-                            nb.of(i),
-                            i,
-                            refs.radius_lap_m,
-                            refs.n0_lap,
-                            refs.lambda_m2,
-                            |j| Some(p.velocity_m_s[j] - p.velocity_m_s[i]),
-                        ) * nu
-                    } else {
-                        Vector::<D>::zeros()
-                    };
-                    visc + g
-                })
-                .collect();
             let p = &mut self.particles;
             for i in 0..p.len() {
                 if p.kind[i] == ParticleKind::Fluid {
-                    p.velocity_m_s[i] += accel[i] * dt_s;
+                    p.velocity_m_s[i] = stage.velocity_m_s[i];
                     p.position_m[i] += p.velocity_m_s[i] * dt_s;
                 }
             }
@@ -200,8 +217,37 @@ impl<const D: usize> Solver<D> {
         Ok(StepReport {
             dt_s,
             ppe,
+            viscosity: stage.solve,
+            non_flowing_fraction,
             surface_count,
         })
+    }
+
+    /// Whether particle i flowed at the start of the last step (false before any step).
+    pub fn is_flowing(&self, i: usize) -> bool {
+        self.strain_invariant
+            .get(i)
+            .is_some_and(|&pi| self.config.rheology.is_flowing(pi))
+    }
+
+    /// Share of fluid particles whose strain-rate invariant is at or below the critical one.
+    fn non_flowing_fraction(&self, strain_invariant: &[f64]) -> f64 {
+        let p = &self.particles;
+        let rheology = self.config.rheology;
+        let (mut fluid, mut resting) = (0usize, 0usize);
+        for i in 0..p.len() {
+            if p.kind[i] == ParticleKind::Fluid {
+                fluid += 1;
+                if !rheology.is_flowing(strain_invariant[i]) {
+                    resting += 1;
+                }
+            }
+        }
+        if fluid == 0 {
+            0.0
+        } else {
+            resting as f64 / fluid as f64
+        }
     }
 
     /// Neighbour lists of the active particles at the current positions.
@@ -227,6 +273,7 @@ impl<const D: usize> Solver<D> {
         let e = c.collision_restitution;
         let dv: Vec<Vector<D>> = (0..p.len())
             .into_par_iter()
+            .with_min_len(PARTICLES_PER_TASK)
             .map(|i| {
                 let mut dv = Vector::<D>::zeros();
                 if p.kind[i] != ParticleKind::Fluid {
@@ -271,6 +318,7 @@ impl<const D: usize> Solver<D> {
         let re = self.refs.radius_n_m;
         let n: Vec<f64> = (0..p.len())
             .into_par_iter()
+            .with_min_len(PARTICLES_PER_TASK)
             .map(|i| number_density(&p.position_m, nb.of(i), i, re, |_| true))
             .collect();
         let threshold = self.config.surface_threshold * self.refs.n0;
@@ -375,6 +423,7 @@ impl<const D: usize> Solver<D> {
         let scale = -dt_s / self.config.density_kg_m3;
         let dv: Vec<Vector<D>> = (0..p.len())
             .into_par_iter()
+            .with_min_len(PARTICLES_PER_TASK)
             .map(|i| {
                 if p.kind[i] != ParticleKind::Fluid {
                     return Vector::<D>::zeros();

@@ -1,7 +1,8 @@
 //! Dam break: a fluid column against the left wall of an open tank (Koshizuka & Oka 1996;
 //! Martin & Moyce 1952). In 3D the tank has a depth and the column spans it.
 use super::Scene;
-use super::lattice::{cells, centre, for_each_index, layer_outside};
+use super::container::add_walls;
+use super::lattice::{cells, centre, for_each_index};
 use crate::mps::{ParticleKind, Particles, Vector};
 
 #[derive(Debug, Clone, PartialEq)]
@@ -24,7 +25,6 @@ pub fn build<const D: usize>(
     wall_layers: u32,
     dummy_layers: u32,
 ) -> Scene<D> {
-    let layers = (wall_layers + dummy_layers) as i64;
     let tank: [i64; D] = std::array::from_fn(|a| {
         if a == D - 1 {
             cells(p.tank_height_m, spacing_m)
@@ -43,24 +43,14 @@ pub fn build<const D: usize>(
     for_each_index([0; D], column, |idx| {
         particles.push(centre(idx, spacing_m), ParticleKind::Fluid)
     });
-    let lo = [-layers; D];
-    let hi: [i64; D] = std::array::from_fn(|a| {
-        if a == D - 1 {
-            tank[a]
-        } else {
-            tank[a] + layers
-        }
-    });
-    for_each_index(lo, hi, |idx| {
-        if let Some(layer) = layer_outside(idx, tank, true) {
-            let kind = if layer < wall_layers as i64 {
-                ParticleKind::Wall
-            } else {
-                ParticleKind::Dummy
-            };
-            particles.push(centre(idx, spacing_m), kind);
-        }
-    });
+    add_walls(
+        &mut particles,
+        &[([0; D], tank)],
+        tank[D - 1],
+        spacing_m,
+        wall_layers,
+        dummy_layers,
+    );
     // Fluid may splash over the walls; beyond one tank size away it becomes a ghost.
     let extent = Vector::<D>::from_fn(|a, _| tank[a] as f64 * spacing_m);
     Scene {
@@ -68,17 +58,4 @@ pub fn build<const D: usize>(
         domain_min_m: -extent,
         domain_max_m: extent * 2.0,
     }
-}
-
-/// Surge front: distance from the wall the column stood against (x = 0) to the far edge of
-/// the furthest fluid particle (its centre plus half a spacing, so it equals the column width
-/// at t = 0).
-pub fn front_position_m<const D: usize>(particles: &Particles<D>, spacing_m: f64) -> f64 {
-    let mut front = f64::NEG_INFINITY;
-    for i in 0..particles.len() {
-        if particles.kind[i] == ParticleKind::Fluid {
-            front = front.max(particles.position_m[i][0]);
-        }
-    }
-    front + 0.5 * spacing_m
 }

@@ -34,22 +34,3 @@ pub fn for_each_index<const D: usize>(lo: [i64; D], hi: [i64; D], mut f: impl Fn
         }
     }
 }
-
-/// How many cells `index` lies outside the box 0..n along any axis (0 = first layer outside),
-/// or None when inside. `open_top` leaves the last axis unbounded above.
-pub fn layer_outside<const D: usize>(index: [i64; D], n: [i64; D], open_top: bool) -> Option<i64> {
-    let mut layer: Option<i64> = None;
-    for a in 0..D {
-        let out = if index[a] < 0 {
-            Some(-index[a] - 1)
-        } else if index[a] >= n[a] && !(open_top && a == D - 1) {
-            Some(index[a] - n[a])
-        } else {
-            None
-        };
-        if let Some(o) = out {
-            layer = Some(layer.map_or(o, |l: i64| l.max(o)));
-        }
-    }
-    layer
-}

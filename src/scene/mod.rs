@@ -1,8 +1,10 @@
 //! Scene builders: turn a manifest's geometry into particles. One file per experiment.
+pub mod container;
 pub mod dam_break;
+pub mod l_flow;
 pub mod lattice;
 
-use crate::mps::{Particles, Vector};
+use crate::mps::{ParticleKind, Particles, Vector};
 
 /// Particles of an experiment plus the box fluid particles must stay in.
 #[derive(Debug, Clone)]
@@ -10,4 +12,16 @@ pub struct Scene<const D: usize> {
     pub particles: Particles<D>,
     pub domain_min_m: Vector<D>,
     pub domain_max_m: Vector<D>,
+}
+
+/// Front position: distance from the wall at x = 0 to the far edge of the furthest fluid
+/// particle (its centre plus half a spacing, so a column of width a starts at exactly a).
+pub fn front_position_m<const D: usize>(particles: &Particles<D>, spacing_m: f64) -> f64 {
+    let mut front = f64::NEG_INFINITY;
+    for i in 0..particles.len() {
+        if particles.kind[i] == ParticleKind::Fluid {
+            front = front.max(particles.position_m[i][0]);
+        }
+    }
+    front + 0.5 * spacing_m
 }
