@@ -3,8 +3,8 @@
 //! `mps/` does one step of the method; this module owns the process around it (output
 //! schedule, diagnostics, checkpoints, stop conditions, outcome).
 use crate::checkpoint;
-use crate::manifest::{Fluid, Manifest, Resolved, Scene as SceneSpec};
-use crate::mps::{ParticleKind, Particles, Rheology, Solver, SolverConfig};
+use crate::manifest::{Fluid, Manifest, PpeSource, Resolved, Scene as SceneSpec};
+use crate::mps::{ParticleKind, Particles, Rheology, Solver, SolverConfig, SourceTerm};
 use crate::proto::mps::v1::{CheckpointHash, Diagnostics, Summary};
 use crate::record::{Outcome, RecordError, Recorder, RunHeader, point_cloud};
 use crate::scene::{self, Scene};
@@ -183,6 +183,10 @@ pub fn solver_config<const D: usize>(m: &Manifest, scene: &Scene<D>) -> SolverCo
         radius_lap_m: m.mps.laplacian_radius * l0,
         surface_threshold: m.mps.surface_threshold,
         relaxation_coefficient: m.mps.relaxation_coefficient,
+        source_term: match m.mps.source_term {
+            PpeSource::NumberDensity => SourceTerm::NumberDensity,
+            PpeSource::Mixed => SourceTerm::Mixed,
+        },
         compressibility_1_pa: m.mps.compressibility_1_pa,
         collision_distance_m: m.mps.collision_distance * l0,
         collision_restitution: m.mps.collision_restitution,
@@ -386,6 +390,15 @@ fn run_in<const D: usize>(
             }
         }
         dt_s = solver.next_dt_s(end_s);
+        if let (Some(share), Some(r)) = (m.stop.non_flowing_fraction, &report) {
+            if solver.time_s >= m.stop.non_flowing_after_s && r.non_flowing_fraction >= share {
+                stop_reason = format!(
+                    "{:.1} % of the fluid particles are non-flowing (stop.non_flowing_fraction = {share})",
+                    100.0 * r.non_flowing_fraction
+                );
+                break;
+            }
+        }
     }
 
     // The final state is always checkpointed (unless the last step failed mid-way: its
@@ -417,6 +430,7 @@ fn run_in<const D: usize>(
     );
     metrics.insert("steps".into(), solver.step as f64);
     metrics.insert("simulated_time_s".into(), solver.time_s);
+    metrics.insert("stop_time_s".into(), solver.time_s);
     let reason = match &outcome {
         Outcome::Completed => stop_reason,
         other => other.reason().to_string(),

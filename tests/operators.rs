@@ -54,10 +54,9 @@ fn check_operators<const D: usize>() {
     let (pos, mid) = lattice::<D>(9, l0);
     let refs = RefValues::on_lattice::<D>(l0, 2.1 * l0, 3.1 * l0);
     let nb = Neighbours::build(&pos, refs.radius_lap_m);
-    let list = nb.of(mid);
 
     // Number density of an interior particle equals n0.
-    let n = number_density(&pos, list, mid, refs.radius_n_m, |_| true);
+    let n = number_density(&pos, &nb, mid, refs.radius_n_m, |_| true);
     assert!(
         (n - refs.n0).abs() < 1e-12 * refs.n0,
         "n = {n}, n0 = {}",
@@ -67,7 +66,7 @@ fn check_operators<const D: usize>() {
     // Gradient of a linear field a . x + c is exact on a full lattice.
     let a = Vector::<D>::from_fn(|k, _| 1.5 - 0.7 * k as f64);
     let phi = |p: &Vector<D>| a.dot(p) + 3.0;
-    let g = gradient(&pos, list, mid, refs.radius_n_m, refs.n0, |j| {
+    let g = gradient(&pos, &nb, mid, refs.radius_n_m, refs.n0, |j| {
         Some(phi(&pos[j]) - phi(&pos[mid]))
     });
     assert!((g - a).norm() < 1e-10, "gradient {g:?} vs {a:?}");
@@ -76,7 +75,7 @@ fn check_operators<const D: usize>() {
     let q = |p: &Vector<D>| p.norm_squared() + a.dot(p);
     let lap = laplacian::<D, 1>(
         &pos,
-        list,
+        &nb,
         mid,
         refs.radius_lap_m,
         refs.n0_lap,

@@ -110,7 +110,7 @@ pub enum Fluid {
         /// Rigid viscosity mu_r in Pa s (> plastic viscosity; >= 1000 times it for ~1 % model error).
         rigid_viscosity_pa_s: f64,
         /// Seed 000 eq. 8 stress-gradient term.
-        #[serde(default)]
+        #[serde(default = "default_true")]
         stress_gradient_term: bool,
     },
 }
@@ -155,6 +155,10 @@ pub struct Mps {
     /// gamma, relaxation coefficient of the PPE source term.
     #[serde(default = "default_relaxation_coefficient")]
     pub relaxation_coefficient: f64,
+    /// Source term of the pressure Poisson equation: `number_density` (Koshizuka & Oka) or
+    /// `mixed` (Tanaka & Masunaga 2010: velocity divergence plus relaxed density error).
+    #[serde(default = "default_source_term")]
+    pub source_term: PpeSource,
     /// Artificial compressibility on the PPE diagonal, in 1/Pa.
     #[serde(default = "default_compressibility_1_pa")]
     pub compressibility_1_pa: f64,
@@ -191,6 +195,7 @@ impl Default for Mps {
             laplacian_radius: default_laplacian_radius(),
             surface_threshold: default_surface_threshold(),
             relaxation_coefficient: default_relaxation_coefficient(),
+            source_term: default_source_term(),
             compressibility_1_pa: default_compressibility_1_pa(),
             collision_distance: default_collision_distance(),
             collision_restitution: default_collision_restitution(),
@@ -215,6 +220,17 @@ fn default_surface_threshold() -> f64 {
 }
 fn default_relaxation_coefficient() -> f64 {
     0.2
+}
+/// PPE source term choice (see [`Mps::source_term`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PpeSource {
+    NumberDensity,
+    Mixed,
+}
+
+fn default_source_term() -> PpeSource {
+    PpeSource::NumberDensity
 }
 fn default_compressibility_1_pa() -> f64 {
     0.45e-9
@@ -384,11 +400,18 @@ pub struct Stop {
     /// Blow-up guard: a run whose particle speed exceeds this (m/s) fails.
     #[serde(default = "default_max_speed_m_s")]
     pub max_speed_m_s: f64,
-    /// Stop once the flow has started (the non-flowing share fell below this) and the share
-    /// of non-flowing particles is back at or above it (seed 000 uses 0.9). Yield-stress
-    /// fluids only; null = off.
+    /// Stop when at least this share of the fluid particles is non-flowing (seed 000 uses
+    /// 0.9), checked from `stop.non_flowing_after_s` on. Yield-stress fluids only; null = off.
     #[serde(default)]
     pub non_flowing_fraction: Option<f64>,
+    /// Simulated time from which `non_flowing_fraction` is checked (everything is at rest,
+    /// hence non-flowing, before the flow starts).
+    #[serde(default = "default_non_flowing_after_s")]
+    pub non_flowing_after_s: f64,
+}
+
+fn default_non_flowing_after_s() -> f64 {
+    0.5
 }
 
 impl Default for Stop {
@@ -397,6 +420,7 @@ impl Default for Stop {
             max_steps: default_max_steps(),
             max_speed_m_s: default_max_speed_m_s(),
             non_flowing_fraction: None,
+            non_flowing_after_s: default_non_flowing_after_s(),
         }
     }
 }

@@ -454,6 +454,11 @@ pub fn check(m: &Manifest) -> Vec<Issue> {
     // stop
     c.int_at_least("stop.max_steps", m.stop.max_steps, 1);
     c.real("stop.max_speed_m_s", m.stop.max_speed_m_s, POSITIVE);
+    c.real(
+        "stop.non_flowing_after_s",
+        m.stop.non_flowing_after_s,
+        NON_NEGATIVE,
+    );
     if let Some(share) = m.stop.non_flowing_fraction {
         if c.real(
             "stop.non_flowing_fraction",

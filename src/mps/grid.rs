@@ -11,6 +11,8 @@ const LIST_CHUNK: usize = 512;
 #[derive(Debug, Clone, Default)]
 pub struct Neighbours {
     pub cutoff_m: f64,
+    /// Period of a periodic x axis (minimum-image displacements), if any.
+    pub period_x_m: Option<f64>,
     pub offsets: Vec<usize>,
     pub indices: Vec<u32>,
 }
@@ -19,6 +21,21 @@ impl Neighbours {
     #[inline]
     pub fn of(&self, i: usize) -> &[u32] {
         &self.indices[self.offsets[i]..self.offsets[i + 1]]
+    }
+
+    /// r_ij = r_j - r_i, the nearest periodic image along x when x is periodic.
+    #[inline]
+    pub fn displacement<const D: usize>(
+        &self,
+        positions: &[Vector<D>],
+        i: usize,
+        j: usize,
+    ) -> Vector<D> {
+        let mut r = positions[j] - positions[i];
+        if let Some(period) = self.period_x_m {
+            r[0] -= period * (r[0] / period).round();
+        }
+        r
     }
 
     /// All j != i with |r_j - r_i| < cutoff_m, for every particle.
@@ -33,10 +50,34 @@ impl Neighbours {
         cutoff_m: f64,
         active: impl Fn(usize) -> bool + Sync,
     ) -> Self {
+        Self::build_general(positions, cutoff_m, None, active)
+    }
+
+    /// As [`Neighbours::build`] with x periodic of period `period_x_m` (all particles must lie
+    /// within one period; the period must be at least three cutoffs).
+    pub fn build_periodic_x<const D: usize>(
+        positions: &[Vector<D>],
+        cutoff_m: f64,
+        period_x_m: f64,
+    ) -> Self {
+        assert!(
+            period_x_m >= 3.0 * cutoff_m,
+            "period {period_x_m} shorter than three cutoffs"
+        );
+        Self::build_general(positions, cutoff_m, Some(period_x_m), |_| true)
+    }
+
+    fn build_general<const D: usize>(
+        positions: &[Vector<D>],
+        cutoff_m: f64,
+        period_x_m: Option<f64>,
+        active: impl Fn(usize) -> bool + Sync,
+    ) -> Self {
         let n = positions.len();
         if n == 0 {
             return Self {
                 cutoff_m,
+                period_x_m,
                 offsets: vec![0],
                 indices: Vec::new(),
             };
@@ -48,16 +89,23 @@ impl Neighbours {
             hi = hi.sup(p);
         }
         let mut dims = [1usize; D];
+        let mut width = [cutoff_m; D];
         for a in 0..D {
             dims[a] = (((hi[a] - lo[a]) / cutoff_m).floor() as usize) + 1;
+        }
+        if let Some(period) = period_x_m {
+            // Whole cells around the period, each at least one cutoff wide.
+            dims[0] = (period / cutoff_m).floor() as usize;
+            width[0] = period / dims[0] as f64;
         }
         let cell_of = |p: &Vector<D>| -> [usize; D] {
             let mut c = [0usize; D];
             for a in 0..D {
-                c[a] = (((p[a] - lo[a]) / cutoff_m).floor() as usize).min(dims[a] - 1);
+                c[a] = (((p[a] - lo[a]) / width[a]).floor() as usize).min(dims[a] - 1);
             }
             c
         };
+        let wrap = period_x_m.is_some();
         let flat = |c: &[usize; D]| -> usize {
             let mut f = 0;
             for a in (0..D).rev() {
@@ -83,6 +131,13 @@ impl Neighbours {
         }
 
         let cutoff2 = cutoff_m * cutoff_m;
+        let image = Self {
+            cutoff_m,
+            period_x_m,
+            offsets: Vec::new(),
+            indices: Vec::new(),
+        };
+        let self_displacement = |j: usize, i: usize| image.displacement(positions, i, j);
         let chunks: Vec<(Vec<usize>, Vec<u32>)> = (0..n.div_ceil(LIST_CHUNK))
             .into_par_iter()
             .map(|chunk| {
@@ -105,7 +160,10 @@ impl Neighbours {
                         for a in 0..D {
                             let off = (rest % 3) as i64 - 1;
                             rest /= 3;
-                            let v = ci[a] as i64 + off;
+                            let mut v = ci[a] as i64 + off;
+                            if a == 0 && wrap {
+                                v = v.rem_euclid(dims[0] as i64);
+                            }
                             if v < 0 || v >= dims[a] as i64 {
                                 inside = false;
                                 break;
@@ -118,7 +176,7 @@ impl Neighbours {
                         let f = flat(&c);
                         for &j in &sorted[start[f]..start[f + 1]] {
                             if j as usize != i
-                                && (positions[j as usize] - pi).norm_squared() < cutoff2
+                                && self_displacement(j as usize, i).norm_squared() < cutoff2
                             {
                                 list.push(j);
                             }
@@ -140,6 +198,7 @@ impl Neighbours {
         }
         Self {
             cutoff_m,
+            period_x_m,
             offsets,
             indices,
         }

@@ -2,6 +2,7 @@
 //!
 //! Each function gathers over the neighbour list of i in its fixed order, so results do not
 //! depend on the thread that computes them.
+use super::grid::Neighbours;
 use super::kernel::weight;
 use super::particles::Vector;
 
@@ -9,17 +10,16 @@ use super::particles::Vector;
 #[inline]
 pub fn number_density<const D: usize>(
     positions: &[Vector<D>],
-    neighbours: &[u32],
+    nb: &Neighbours,
     i: usize,
     radius_m: f64,
     include: impl Fn(usize) -> bool,
 ) -> f64 {
-    let pi = positions[i];
     let mut n = 0.0;
-    for &j in neighbours {
+    for &j in nb.of(i) {
         let j = j as usize;
         if include(j) {
-            n += weight((positions[j] - pi).norm(), radius_m);
+            n += weight(nb.displacement(positions, i, j).norm(), radius_m);
         }
     }
     n
@@ -30,17 +30,16 @@ pub fn number_density<const D: usize>(
 #[inline]
 pub fn gradient<const D: usize>(
     positions: &[Vector<D>],
-    neighbours: &[u32],
+    nb: &Neighbours,
     i: usize,
     radius_m: f64,
     n0: f64,
     difference: impl Fn(usize) -> Option<f64>,
 ) -> Vector<D> {
-    let pi = positions[i];
     let mut g = Vector::<D>::zeros();
-    for &j in neighbours {
+    for &j in nb.of(i) {
         let j = j as usize;
-        let r = positions[j] - pi;
+        let r = nb.displacement(positions, i, j);
         let r2 = r.norm_squared();
         let w = weight(r2.sqrt(), radius_m);
         if w == 0.0 {
@@ -58,18 +57,17 @@ pub fn gradient<const D: usize>(
 #[inline]
 pub fn laplacian<const D: usize, const M: usize>(
     positions: &[Vector<D>],
-    neighbours: &[u32],
+    nb: &Neighbours,
     i: usize,
     radius_m: f64,
     n0: f64,
     lambda_m2: f64,
     difference: impl Fn(usize) -> Option<nalgebra::SVector<f64, M>>,
 ) -> nalgebra::SVector<f64, M> {
-    let pi = positions[i];
     let mut s = nalgebra::SVector::<f64, M>::zeros();
-    for &j in neighbours {
+    for &j in nb.of(i) {
         let j = j as usize;
-        let w = weight((positions[j] - pi).norm(), radius_m);
+        let w = weight(nb.displacement(positions, i, j).norm(), radius_m);
         if w == 0.0 {
             continue;
         }

@@ -28,6 +28,7 @@ pub struct SolverConfig<const D: usize> {
     pub surface_threshold: f64,
     /// gamma: relaxation of the number-density source term.
     pub relaxation_coefficient: f64,
+    pub source_term: SourceTerm,
     pub compressibility_1_pa: f64,
     pub collision_distance_m: f64,
     pub collision_restitution: f64,
@@ -40,6 +41,16 @@ pub struct SolverConfig<const D: usize> {
     /// Fluid particles must stay inside this box.
     pub domain_min_m: Vector<D>,
     pub domain_max_m: Vector<D>,
+}
+
+/// Source term of the pressure Poisson equation.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SourceTerm {
+    /// gamma rho/dt^2 (n*_i - n0)/n0 (Koshizuka & Oka 1996).
+    NumberDensity,
+    /// -(rho/dt) div(u*)_i + gamma rho/dt^2 (n^k_i - n0)/n0 with n^k at the start of the step
+    /// (Tanaka & Masunaga 2010): much less pressure noise.
+    Mixed,
 }
 
 /// Why a step could not be completed.
@@ -163,6 +174,10 @@ impl<const D: usize> Solver<D> {
         // (1) Viscosity (implicit, with the effective viscosity of the rheology) and gravity
         // give the predicted velocity u*, then (2) r* = r + dt u*.
         self.rebuild_neighbours();
+        let start_density = match self.config.source_term {
+            SourceTerm::Mixed => Some(self.number_density()),
+            SourceTerm::NumberDensity => None,
+        };
         let stage = predict_velocity(
             &self.particles,
             &self.neighbours,
@@ -195,11 +210,15 @@ impl<const D: usize> Solver<D> {
         self.collide(dt_s);
 
         // (3) Number density n*, free surface, pressure Poisson equation.
-        let (number_density, surface) = self.number_density_and_surface();
+        let number_density = self.number_density();
+        let threshold = self.config.surface_threshold * self.refs.n0;
+        let surface: Vec<bool> = number_density.iter().map(|&n| n < threshold).collect();
+        let source =
+            self.pressure_source(dt_s, start_density.as_deref().unwrap_or(&number_density));
         let surface_count = (0..self.particles.len())
             .filter(|&i| self.particles.kind[i] == ParticleKind::Fluid && surface[i])
             .count();
-        let ppe = self.solve_pressure(dt_s, &number_density, &surface);
+        let ppe = self.solve_pressure(dt_s, &source, &surface);
         if !ppe.converged {
             return Err(StepError::PressureNotConverged {
                 residual: ppe.relative_residual,
@@ -284,7 +303,7 @@ impl<const D: usize> Solver<D> {
                     if p.kind[j] == ParticleKind::Dummy {
                         continue;
                     }
-                    let r = p.position_m[j] - p.position_m[i];
+                    let r = nb.displacement(&p.position_m, i, j);
                     let r2 = r.norm_squared();
                     if r2 >= d2 || r2 == 0.0 {
                         continue;
@@ -310,31 +329,57 @@ impl<const D: usize> Solver<D> {
         }
     }
 
-    /// n*_i with radius re_n over all particles (dummies included: they fill the wall's
-    /// support) and the free-surface flag n*_i < beta n0.
-    fn number_density_and_surface(&self) -> (Vec<f64>, Vec<bool>) {
+    /// n_i with radius re_n at the current positions, over all active particles (dummies
+    /// included: they fill the wall's support).
+    fn number_density(&self) -> Vec<f64> {
         let p = &self.particles;
         let nb = &self.neighbours;
         let re = self.refs.radius_n_m;
-        let n: Vec<f64> = (0..p.len())
+        (0..p.len())
             .into_par_iter()
             .with_min_len(PARTICLES_PER_TASK)
-            .map(|i| number_density(&p.position_m, nb.of(i), i, re, |_| true))
-            .collect();
-        let threshold = self.config.surface_threshold * self.refs.n0;
-        let surface = n.iter().map(|&n| n < threshold).collect();
-        (n, surface)
+            .map(|i| number_density(&p.position_m, nb, i, re, |_| true))
+            .collect()
     }
 
-    /// PPE (Koshizuka & Oka): -<lap p>_i + rho kappa p_i / dt^2 = gamma rho/dt^2 (n*_i - n0)/n0
-    /// for fluid and wall particles not on the surface; p = 0 on the surface (Dirichlet).
+    /// Right-hand side of the PPE per particle (see [`SourceTerm`]); `density` is n* for the
+    /// number-density source and n^k for the mixed one.
+    fn pressure_source(&self, dt_s: f64, density: &[f64]) -> Vec<f64> {
+        let c = &self.config;
+        let p = &self.particles;
+        let nb = &self.neighbours;
+        let refs = self.refs;
+        let rho = c.density_kg_m3;
+        let density_scale = c.relaxation_coefficient * rho / (dt_s * dt_s);
+        let mixed = c.source_term == SourceTerm::Mixed;
+        (0..p.len())
+            .into_par_iter()
+            .with_min_len(PARTICLES_PER_TASK)
+            .map(|i| {
+                let mut b = density_scale * (density[i] - refs.n0) / refs.n0;
+                if mixed && p.kind[i].has_pressure() {
+                    // Divergence model: d/n0 sum_j (u_j - u_i) . r_ij w / |r_ij|^2.
+                    let mut div = 0.0;
+                    for &j in nb.of(i) {
+                        let j = j as usize;
+                        let r = nb.displacement(&p.position_m, i, j);
+                        let r2 = r.norm_squared();
+                        let w = weight(r2.sqrt(), refs.radius_n_m);
+                        if w > 0.0 {
+                            div += (p.velocity_m_s[j] - p.velocity_m_s[i]).dot(&r) * w / r2;
+                        }
+                    }
+                    b -= rho / dt_s * div * (D as f64 / refs.n0);
+                }
+                b
+            })
+            .collect()
+    }
+
+    /// PPE (Koshizuka & Oka): -<lap p>_i + rho kappa p_i / dt^2 = source_i for fluid and wall
+    /// particles not on the surface; p = 0 on the surface (Dirichlet).
     /// Assembled once in CSR and solved by Jacobi-PCG; negative pressure is clipped to 0.
-    fn solve_pressure(
-        &mut self,
-        dt_s: f64,
-        number_density: &[f64],
-        surface: &[bool],
-    ) -> SolveReport {
+    fn solve_pressure(&mut self, dt_s: f64, source: &[f64], surface: &[bool]) -> SolveReport {
         let c = &self.config;
         let p = &self.particles;
         let nb = &self.neighbours;
@@ -358,7 +403,6 @@ impl<const D: usize> Solver<D> {
             .collect();
         let coef = 2.0 * D as f64 / (refs.lambda_m2 * refs.n0_lap);
         let diag_extra = rho * c.compressibility_1_pa / (dt_s * dt_s);
-        let source_scale = c.relaxation_coefficient * rho / (dt_s * dt_s);
         let assembled: Vec<(f64, f64, Vec<(u32, f64)>)> = rows
             .par_iter()
             .map(|&i| {
@@ -371,7 +415,7 @@ impl<const D: usize> Solver<D> {
                     }
                     let a = coef
                         * weight(
-                            (p.position_m[j] - p.position_m[i]).norm(),
+                            nb.displacement(&p.position_m, i, j).norm(),
                             refs.radius_lap_m,
                         );
                     if a == 0.0 {
@@ -382,7 +426,7 @@ impl<const D: usize> Solver<D> {
                         entries.push((unknown_of[j], -a));
                     }
                 }
-                let source = source_scale * (number_density[i] - refs.n0) / refs.n0;
+                let source = source[i];
                 (diag, source, entries)
             })
             .collect();
@@ -432,12 +476,13 @@ impl<const D: usize> Solver<D> {
                 for &j in nb.of(i) {
                     let j = j as usize;
                     if p.kind[j].has_pressure()
-                        && weight((p.position_m[j] - p.position_m[i]).norm(), refs.radius_n_m) > 0.0
+                        && weight(nb.displacement(&p.position_m, i, j).norm(), refs.radius_n_m)
+                            > 0.0
                     {
                         p_min = p_min.min(p.pressure_pa[j]);
                     }
                 }
-                gradient(&p.position_m, nb.of(i), i, refs.radius_n_m, refs.n0, |j| {
+                gradient(&p.position_m, nb, i, refs.radius_n_m, refs.n0, |j| {
                     p.kind[j].has_pressure().then(|| p.pressure_pa[j] - p_min)
                 }) * scale
             })

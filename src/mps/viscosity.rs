@@ -2,7 +2,6 @@
 //! term of seed 000 eq. 8, and the implicit viscous predictor solved by CG.
 use super::grid::Neighbours;
 use super::kernel::{RefValues, weight};
-use super::operators::gradient;
 use super::particles::{ParticleKind, Particles, Vector};
 use super::pressure::{CsrMatrix, SolveReport, solve_pcg};
 use super::reduce::PARTICLES_PER_TASK;
@@ -15,7 +14,7 @@ use rayon::prelude::*;
 pub struct ViscousSettings {
     pub rheology: Rheology,
     pub density_kg_m3: f64,
-    /// Seed 000 eq. 8 term 2 e . grad(Lambda) / rho (explicit).
+    /// Seed 000 eq. 8 stress-gradient term (as the divergence form, see [`predict_velocity`]).
     pub stress_gradient_term: bool,
     pub tolerance: f64,
     pub max_iterations: u32,
@@ -41,12 +40,11 @@ pub fn velocity_gradient<const D: usize>(
     refs: &RefValues,
     i: usize,
 ) -> SMatrix<f64, D, D> {
-    let pi = p.position_m[i];
     let ui = p.velocity_m_s[i];
     let mut g = SMatrix::<f64, D, D>::zeros();
     for &j in nb.of(i) {
         let j = j as usize;
-        let r = p.position_m[j] - pi;
+        let r = nb.displacement(&p.position_m, i, j);
         let r2 = r.norm_squared();
         let w = weight(r2.sqrt(), refs.radius_n_m);
         if w == 0.0 {
@@ -63,10 +61,18 @@ pub fn strain_invariant<const D: usize>(g: &SMatrix<f64, D, D>) -> f64 {
     2.0 * e.component_mul(&e).sum()
 }
 
-/// u* from (I - dt nu_i <lap>) u* = u^n + dt (body force + eq. 8 term), with nu_i from u^n.
-/// Each row is divided by dt nu_i, which makes the matrix symmetric positive definite:
-/// (1/(dt nu_i) + sum_j a_ij) u_i - sum_j a_ij u_j = rhs_i / (dt nu_i), a_ij = 2d/(lambda n0) w_ij;
-/// wall and dummy velocities are known and move to the right-hand side.
+/// Implicit viscous predictor: u* solves u* - dt V(u*) = u^n + dt f, with the viscosity
+/// taken from the strain rate of u^n. Two forms of the viscous term V:
+/// - without the eq. 8 term: nu_i <lap u>_i (seed 000 eq. 8 without its fourth term). Each
+///   row is divided by dt nu_i, which makes the matrix symmetric positive definite:
+///   (1/(dt nu_i) + sum_j a_ij) u_i - sum_j a_ij u_j = rhs_i / (dt nu_i);
+/// - with it: the divergence form div(mu grad u)/rho = (mu lap u + grad(mu) . grad u)/rho,
+///   2d/(lambda n0 rho) sum_j mu_ij (u_j - u_i) w_ij with the harmonic mean mu_ij, which is
+///   symmetric as it stands. It equals eq. 8's (eta + Lambda) lap u + 2 e . grad(Lambda) in
+///   unidirectional shear (the L-flow channel, Poiseuille); the part from grad(u)^T, zero
+///   there, is left out. Written explicitly as in the seed, the term is unstable at viscosity
+///   ratios of 1000 (its rate 2 dLambda / (rho l0^2) far exceeds 1/dt).
+/// a_ij = 2d/(lambda n0) w_ij; wall and dummy velocities are known and go to the right side.
 pub fn predict_velocity<const D: usize>(
     p: &Particles<D>,
     nb: &Neighbours,
@@ -78,63 +84,39 @@ pub fn predict_velocity<const D: usize>(
     let rho = settings.density_kg_m3;
     let n = p.len();
     let is_fluid = |i: usize| p.kind[i] == ParticleKind::Fluid;
-    let gradients: Vec<SMatrix<f64, D, D>> = (0..n)
+    let strain: Vec<f64> = (0..n)
         .into_par_iter()
         .with_min_len(PARTICLES_PER_TASK)
         .map(|i| {
             if is_fluid(i) {
-                velocity_gradient(p, nb, refs, i)
+                strain_invariant(&velocity_gradient(p, nb, refs, i))
             } else {
-                SMatrix::zeros()
+                0.0
             }
         })
-        .collect();
-    let strain: Vec<f64> = gradients
-        .par_iter()
-        .with_min_len(PARTICLES_PER_TASK)
-        .map(strain_invariant)
         .collect();
     let rheology = settings.rheology;
-
-    // Explicit part: u^n + dt (f + 2 e . grad(Lambda) / rho).
-    let lambda: Vec<f64> = strain
-        .par_iter()
-        .with_min_len(PARTICLES_PER_TASK)
-        .map(|&s| rheology.yield_viscosity_pa_s(s))
-        .collect();
+    let mu: Vec<f64> = strain.iter().map(|&s| rheology.viscosity_pa_s(s)).collect();
     let rhs: Vec<Vector<D>> = (0..n)
-        .into_par_iter()
-        .with_min_len(PARTICLES_PER_TASK)
         .map(|i| {
-            if !is_fluid(i) {
-                return p.velocity_m_s[i];
+            if is_fluid(i) {
+                p.velocity_m_s[i] + body_force_m_s2 * dt_s
+            } else {
+                p.velocity_m_s[i]
             }
-            let mut accel = body_force_m_s2;
-            if settings.stress_gradient_term {
-                let grad_lambda =
-                    gradient(&p.position_m, nb.of(i), i, refs.radius_n_m, refs.n0, |j| {
-                        is_fluid(j).then(|| lambda[j] - lambda[i])
-                    });
-                let g = &gradients[i];
-                let e = (g + g.transpose()) * 0.5;
-                accel += e * grad_lambda * (2.0 / rho);
-            }
-            p.velocity_m_s[i] + accel * dt_s
         })
         .collect();
-
-    let nu: Vec<f64> = strain
-        .iter()
-        .map(|&s| rheology.viscosity_pa_s(s) / rho)
+    let divergence_form = settings.stress_gradient_term;
+    let rows: Vec<usize> = (0..n)
+        .filter(|&i| is_fluid(i) && (divergence_form || mu[i] > 0.0))
         .collect();
-    let rows: Vec<usize> = (0..n).filter(|&i| is_fluid(i) && nu[i] > 0.0).collect();
     let mut velocity = rhs.clone();
     let mut solve = SolveReport {
         iterations: 0,
         relative_residual: 0.0,
         converged: true,
     };
-    if rows.is_empty() {
+    if rows.is_empty() || mu.iter().all(|&m| m == 0.0) {
         return ViscousStage {
             velocity_m_s: velocity,
             strain_invariant: strain,
@@ -146,11 +128,16 @@ pub fn predict_velocity<const D: usize>(
         row_of[i] = k as u32;
     }
     let coef = 2.0 * D as f64 / (refs.lambda_m2 * refs.n0_lap);
-    // Per row: diagonal, scale 1/(dt nu_i), known boundary contribution, fluid couplings.
+    // Row i: (s_i + sum_j c_ij) u_i - sum_fluid c_ij u_j = s_i rhs_i + sum_walls c_ij u_j.
     let assembled: Vec<(f64, f64, Vector<D>, Vec<(u32, f64)>)> = rows
         .par_iter()
+        .with_min_len(PARTICLES_PER_TASK)
         .map(|&i| {
-            let scale = 1.0 / (dt_s * nu[i]);
+            let scale = if divergence_form {
+                1.0
+            } else {
+                rho / (dt_s * mu[i])
+            };
             let mut diag = scale;
             let mut boundary = Vector::<D>::zeros();
             let mut entries = Vec::new();
@@ -158,17 +145,27 @@ pub fn predict_velocity<const D: usize>(
                 let j = j as usize;
                 let a = coef
                     * weight(
-                        (p.position_m[j] - p.position_m[i]).norm(),
+                        nb.displacement(&p.position_m, i, j).norm(),
                         refs.radius_lap_m,
                     );
                 if a == 0.0 {
                     continue;
                 }
-                diag += a;
-                if row_of[j] != u32::MAX {
-                    entries.push((row_of[j], -a));
+                let c = if divergence_form {
+                    let mu_ij = if is_fluid(j) {
+                        harmonic_mean(mu[i], mu[j])
+                    } else {
+                        mu[i]
+                    };
+                    a * mu_ij * dt_s / rho
                 } else {
-                    boundary += p.velocity_m_s[j] * a;
+                    a
+                };
+                diag += c;
+                if row_of[j] != u32::MAX {
+                    entries.push((row_of[j], -c));
+                } else {
+                    boundary += p.velocity_m_s[j] * c;
                 }
             }
             (diag, scale, boundary, entries)
@@ -212,5 +209,16 @@ pub fn predict_velocity<const D: usize>(
         velocity_m_s: velocity,
         strain_invariant: strain,
         solve,
+    }
+}
+
+/// 2 a b / (a + b): the pair viscosity of the divergence form (dominated by the smaller one,
+/// as for conductances in series); 0 when both are 0.
+#[inline]
+fn harmonic_mean(a: f64, b: f64) -> f64 {
+    if a + b > 0.0 {
+        2.0 * a * b / (a + b)
+    } else {
+        0.0
     }
 }
