@@ -424,11 +424,9 @@ pub fn time_loop<const D: usize>(
                 break;
             }
         }
-        if let Some(stop) = control.stop_at_step {
-            if solver.step >= stop {
-                outcome = Outcome::Interrupted(format!("stopped at step {stop}"));
-                break;
-            }
+        if let Some(stop) = control.stop_at_step.filter(|&s| solver.step >= s) {
+            outcome = Outcome::Interrupted(format!("stopped at step {stop}"));
+            break;
         }
         if !sink.keep_going() {
             outcome = Outcome::Interrupted("stopped by the output".to_string());
