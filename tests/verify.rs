@@ -214,6 +214,7 @@ fn a_changed_checkpoint_value_is_caught_with_particle_field_and_values() {
             },
         );
         let (code, text) = verify_cli(&tampered);
+        eprintln!("verify of a tampered checkpoint (rehash = {rehash}):\n{text}");
         assert_eq!(code, 1, "{text}");
         assert!(
             text.contains("MISMATCH at checkpoint 2 (logged step 40"),
@@ -266,6 +267,7 @@ fn a_changed_stored_manifest_is_caught() {
         },
     );
     let (code, text) = verify_cli(&tampered);
+    eprintln!("verify of a tampered manifest:\n{text}");
     assert_eq!(code, 1, "{text}");
     let changed = common::resolve("smoke_2d.yaml", &["gravity_m_s2=9.8"]).hash_hex;
     assert!(
@@ -293,6 +295,7 @@ fn a_changed_stored_manifest_is_caught() {
         },
     );
     let (code, text) = verify_cli(&forged);
+    eprintln!("verify of a consistently forged manifest:\n{text}");
     assert_eq!(code, 1, "{text}");
     assert!(
         text.contains("MISMATCH at checkpoint 1 (logged step 20"),

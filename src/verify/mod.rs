@@ -84,6 +84,8 @@ pub struct VerifyReport {
     pub hashes: Vec<CheckpointHash>,
     /// Wall-clock seconds of the replay.
     pub replay_wall_s: f64,
+    /// False when the stored manifest did not match its hash: nothing was replayed.
+    pub replayed: bool,
 }
 
 impl VerifyReport {
@@ -98,15 +100,21 @@ impl fmt::Display for VerifyReport {
             None => "the manifest's initial state".to_string(),
             Some(k) => format!("logged checkpoint {k}"),
         };
+        let replay = if self.replayed {
+            format!(
+                "replayed from {start} to checkpoint {} in {:.2} s",
+                self.to, self.replay_wall_s
+            )
+        } else {
+            "not replayed".to_string()
+        };
         writeln!(
             f,
-            "{}: run {} (experiment {}), outcome {}; replayed from {start} to checkpoint {} in {:.2} s",
+            "{}: run {} (experiment {}), outcome {}; {replay}",
             self.path.display(),
             self.name,
             self.experiment_sha256,
             self.outcome,
-            self.to,
-            self.replay_wall_s
         )?;
         if let Some(m) = &self.mismatch {
             writeln!(f, "MISMATCH at {m}")?;
@@ -114,14 +122,22 @@ impl fmt::Display for VerifyReport {
         for p in &self.problems {
             writeln!(f, "MISMATCH: {p}")?;
         }
+        if !self.replayed {
+            return write!(
+                f,
+                "FAILED: the stored manifest is not the recorded experiment"
+            );
+        }
         let summary = if self.summary_compared {
             if self.problems.is_empty() {
                 "; summary metrics identical"
             } else {
                 ""
             }
+        } else if self.mismatch.is_some() {
+            "; summary not compared (a checkpoint differs)"
         } else {
-            "; summary not compared (segment, or no summary in the file)"
+            "; summary not compared (segment, or the file has no summary)"
         };
         write!(
             f,
@@ -210,6 +226,7 @@ pub fn verify(path: &Path, options: &VerifyOptions) -> Result<VerifyReport, Unus
             })
             .collect(),
         replay_wall_s: 0.0,
+        replayed: false,
     };
     let resolved = match manifest_of(&run) {
         Ok(r) => r,
@@ -290,6 +307,7 @@ pub fn verify(path: &Path, options: &VerifyOptions) -> Result<VerifyReport, Unus
         _ => replay::<2>(&resolved, &run, options, to),
     });
     report.replay_wall_s = started.elapsed().as_secs_f64();
+    report.replayed = true;
     let (compare, summary) = replay.map_err(unusable)?;
     report.matched = compare.matched;
     report.mismatch = compare.mismatch;
