@@ -38,10 +38,8 @@ fn wait_for_checkpoints(out: &Path, n: usize) -> PathBuf {
             d.filter_map(|e| e.ok().map(|e| e.path()))
                 .find(|p| p.to_string_lossy().ends_with(".mcap.partial"))
         });
-        if let Some(p) = partial {
-            if read_run(&p).is_ok_and(|r| r.states.len() >= n) {
-                return p;
-            }
+        if let Some(p) = partial.filter(|p| read_run(p).is_ok_and(|r| r.states.len() >= n)) {
+            return p;
         }
         std::thread::sleep(Duration::from_millis(10));
     }

@@ -18,14 +18,14 @@ fn smoke_run(dir: &Path) -> PathBuf {
     common::run_in(&resolved, dir, 2).path
 }
 
+/// An edit of one checkpoint message.
+type StateEdit = Box<dyn Fn(&mut mps_runner::proto::mps::v1::StateCheckpoint)>;
+
 /// What a rewrite may change.
 #[derive(Default)]
 struct Edit {
-    /// (checkpoint index, f64 edit applied to the checkpoint message)
-    state: Option<(
-        usize,
-        Box<dyn Fn(&mut mps_runner::proto::mps::v1::StateCheckpoint)>,
-    )>,
+    /// (checkpoint index, edit applied to that checkpoint)
+    state: Option<(usize, StateEdit)>,
     /// Recompute the edited checkpoint's stored hash and the summary's list (a careful forger).
     rehash: bool,
     canonical: Option<(String, String)>,
@@ -65,13 +65,11 @@ fn rewrite(src: &Path, dst: &Path, edit: Edit) {
     for (t, msg) in read_messages(src).unwrap() {
         match msg {
             Logged::State(mut s) => {
-                if let Some((k, f)) = &edit.state {
-                    if *k == index {
-                        f(&mut s);
-                        if edit.rehash {
-                            s.state_sha256 = state_sha256(&s);
-                            new_hash = Some(s.state_sha256.clone());
-                        }
+                if let Some((_, f)) = edit.state.as_ref().filter(|(k, _)| *k == index) {
+                    f(&mut s);
+                    if edit.rehash {
+                        s.state_sha256 = state_sha256(&s);
+                        new_hash = Some(s.state_sha256.clone());
                     }
                 }
                 index += 1;
