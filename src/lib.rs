@@ -4,5 +4,8 @@ pub mod manifest;
 pub mod mps;
 pub mod proto;
 pub mod record;
+pub mod restore;
+pub mod resume;
 pub mod run;
 pub mod scene;
+pub mod verify;

@@ -5,7 +5,8 @@
 use crate::checkpoint;
 use crate::manifest::{Fluid, Manifest, PpeSource, Resolved, Scene as SceneSpec};
 use crate::mps::{ParticleKind, Particles, Rheology, Solver, SolverConfig, SourceTerm};
-use crate::proto::mps::v1::{CheckpointHash, Diagnostics, Summary};
+use crate::proto::foxglove::PointCloud;
+use crate::proto::mps::v1::{CheckpointHash, Diagnostics, StateCheckpoint, Summary};
 use crate::record::{Outcome, RecordError, Recorder, RunHeader, point_cloud};
 use crate::scene::{self, Scene};
 use std::collections::BTreeMap;
@@ -220,7 +221,7 @@ pub fn experiment_metrics<const D: usize>(
 }
 
 /// Simulation time in integer nanoseconds (MCAP log time).
-fn time_ns(time_s: f64) -> u64 {
+pub fn time_ns(time_s: f64) -> u64 {
     (time_s * 1e9).round() as u64
 }
 
@@ -237,6 +238,16 @@ impl Schedule {
             interval_s,
             next: 0,
         }
+    }
+    /// The schedule of a run restored at `time_s`, that time already processed: the next
+    /// emission is at the smallest k with k interval > time_s (where [`Schedule::due`] leaves
+    /// it whether or not it fired at `time_s`).
+    fn after(interval_s: f64, time_s: f64) -> Self {
+        let mut next = ((time_s / interval_s) as u64).saturating_sub(2);
+        while time_s >= next as f64 * interval_s {
+            next += 1;
+        }
+        Self { interval_s, next }
     }
     fn due(&mut self, time_s: f64) -> bool {
         if time_s >= self.next as f64 * self.interval_s {
@@ -281,7 +292,7 @@ fn diagnostics<const D: usize>(
     }
 }
 
-fn cloud<const D: usize>(solver: &Solver<D>) -> crate::proto::foxglove::PointCloud {
+fn cloud<const D: usize>(solver: &Solver<D>) -> PointCloud {
     let p = &solver.particles;
     // Dummies only pad the walls and ghosts have left the domain: neither is shown.
     let shown: Vec<usize> = (0..p.len())
@@ -329,40 +340,142 @@ fn run_in<const D: usize>(
     };
     let mut recorder = Recorder::create(&path, &header)?;
     let started = std::time::Instant::now();
+    let control = LoopControl {
+        interrupt: options.interrupt.clone(),
+        progress: options.progress,
+        stop_at_step: None,
+    };
+    let end = time_loop(
+        m,
+        &resolved.hash_hex,
+        &mut solver,
+        LoopStart::default(),
+        &control,
+        &mut recorder,
+    )?;
+    let path = recorder.finish(time_ns(solver.time_s), &end.summary, &end.outcome)?;
+    Ok(RunResult {
+        path,
+        outcome: end.outcome,
+        summary: end.summary,
+        wall_time_s: started.elapsed().as_secs_f64(),
+    })
+}
 
+/// Where the time loop's output goes: the [`Recorder`] for a run or a resume, a comparison
+/// with a logged run for a replay (`runner verify`). One loop serves all of them.
+pub trait Sink {
+    /// Whether diagnostics rows and point clouds are wanted (a replay skips building them).
+    fn wants_frames(&self) -> bool {
+        true
+    }
+    fn diagnostics(&mut self, time_ns: u64, msg: &Diagnostics) -> Result<(), RunError>;
+    fn cloud(&mut self, time_ns: u64, msg: &PointCloud) -> Result<(), RunError>;
+    /// A state checkpoint (`msg.index` is its 0-based number in the run, hash filled in).
+    fn checkpoint(&mut self, time_ns: u64, msg: &StateCheckpoint) -> Result<(), RunError>;
+    /// False stops the loop as if interrupted (a replay that found a mismatch).
+    fn keep_going(&self) -> bool {
+        true
+    }
+}
+
+impl Sink for Recorder {
+    fn diagnostics(&mut self, time_ns: u64, msg: &Diagnostics) -> Result<(), RunError> {
+        Ok(self.write_diagnostics(time_ns, msg)?)
+    }
+    fn cloud(&mut self, time_ns: u64, msg: &PointCloud) -> Result<(), RunError> {
+        Ok(self.write_cloud(time_ns, msg)?)
+    }
+    fn checkpoint(&mut self, time_ns: u64, msg: &StateCheckpoint) -> Result<(), RunError> {
+        Ok(self.write_state(time_ns, msg)?)
+    }
+}
+
+/// Where the time loop starts. The default is a fresh run: the solver holds the initial
+/// scene at step 0 and every output stream fires at t = 0.
+#[derive(Debug, Clone, Default)]
+pub struct LoopStart {
+    /// The solver's state was restored from a checkpoint whose time has been processed: the
+    /// output schedules start at the first multiple of their interval after it.
+    pub restored: bool,
+    /// Checkpoints already logged (their hashes go into the summary; the next index follows).
+    pub checkpoints: Vec<CheckpointHash>,
+    /// Step of the last checkpoint already logged, if it holds the solver's current state.
+    pub last_checkpoint_step: Option<u64>,
+}
+
+/// What may stop the loop besides the experiment's own end and stop conditions.
+#[derive(Debug, Clone, Default)]
+pub struct LoopControl {
+    /// Set from outside (signal handler): stop as "interrupted".
+    pub interrupt: Option<Arc<AtomicBool>>,
+    /// Progress lines on stderr.
+    pub progress: bool,
+    /// Stop as "interrupted" once this step is reached (a replay of an interrupted or cut
+    /// short run, or of a segment), at the same point of the loop as a signal would.
+    pub stop_at_step: Option<u64>,
+}
+
+/// How the loop ended: the outcome and the summary (metrics at the last state, every
+/// checkpoint hash).
+#[derive(Debug, Clone)]
+pub struct LoopEnd {
+    pub outcome: Outcome,
+    pub summary: Summary,
+}
+
+/// The time loop: from the solver's current state to the end (or a stop), sending
+/// diagnostics, clouds and checkpoints to `sink` on their schedules, and the final state as
+/// a checkpoint. Every run, resume and replay goes through here, so a replay takes exactly
+/// the steps the run took.
+pub fn time_loop<const D: usize>(
+    m: &Manifest,
+    experiment_sha256: &str,
+    solver: &mut Solver<D>,
+    start: LoopStart,
+    control: &LoopControl,
+    sink: &mut dyn Sink,
+) -> Result<LoopEnd, RunError> {
     let end_s = m.time.end_s;
-    let mut diag_schedule = Schedule::new(m.output.diagnostics_interval_s);
-    let mut cloud_schedule = Schedule::new(m.output.cloud_interval_s);
-    let mut checkpoint_schedule = Schedule::new(m.output.checkpoint_interval_s);
-    let mut progress_schedule = Schedule::new(end_s / 10.0);
-    let mut checkpoints: Vec<CheckpointHash> = Vec::new();
-    let mut last_checkpoint_step: Option<u64> = None;
+    let schedule = |interval_s: f64| {
+        if start.restored {
+            Schedule::after(interval_s, solver.time_s)
+        } else {
+            Schedule::new(interval_s)
+        }
+    };
+    let mut diag_schedule = schedule(m.output.diagnostics_interval_s);
+    let mut cloud_schedule = schedule(m.output.cloud_interval_s);
+    let mut checkpoint_schedule = schedule(m.output.checkpoint_interval_s);
+    let mut progress_schedule = schedule(end_s / 10.0);
+    let mut checkpoints: Vec<CheckpointHash> = start.checkpoints;
+    let mut last_checkpoint_step: Option<u64> = start.last_checkpoint_step;
     let mut outcome = Outcome::Completed;
     let mut stop_reason = String::new();
     let mut report = None;
     let mut dt_s = solver.next_dt_s(end_s);
+    let frames = sink.wants_frames();
 
     loop {
         let t = solver.time_s;
-        if diag_schedule.due(t) {
-            recorder
-                .write_diagnostics(time_ns(t), &diagnostics(m, &solver, dt_s, report.as_ref()))?;
+        if diag_schedule.due(t) && frames {
+            sink.diagnostics(time_ns(t), &diagnostics(m, solver, dt_s, report.as_ref()))?;
         }
-        if cloud_schedule.due(t) {
-            recorder.write_cloud(time_ns(t), &cloud(&solver))?;
+        if cloud_schedule.due(t) && frames {
+            sink.cloud(time_ns(t), &cloud(solver))?;
         }
         if checkpoint_schedule.due(t) {
-            let msg = checkpoint::to_message(checkpoints.len() as u32, &solver, dt_s);
+            let msg = checkpoint::to_message(checkpoints.len() as u32, solver, dt_s);
             checkpoints.push(CheckpointHash {
                 index: msg.index,
                 step: msg.step,
                 time_s: msg.time_s,
                 state_sha256: msg.state_sha256.clone(),
             });
-            recorder.write_state(time_ns(t), &msg)?;
+            sink.checkpoint(time_ns(t), &msg)?;
             last_checkpoint_step = Some(solver.step);
         }
-        if options.progress && progress_schedule.due(t) {
+        if control.progress && progress_schedule.due(t) {
             eprintln!(
                 "{}: t = {:.4} / {} s, step {}",
                 m.name, t, end_s, solver.step
@@ -376,11 +489,19 @@ fn run_in<const D: usize>(
             stop_reason = format!("stop.max_steps = {} reached", m.stop.max_steps);
             break;
         }
-        if let Some(flag) = &options.interrupt {
+        if let Some(flag) = &control.interrupt {
             if flag.load(Ordering::SeqCst) {
                 outcome = Outcome::Interrupted("interrupted by signal".to_string());
                 break;
             }
+        }
+        if let Some(stop) = control.stop_at_step.filter(|&s| solver.step >= s) {
+            outcome = Outcome::Interrupted(format!("stopped at step {stop}"));
+            break;
+        }
+        if !sink.keep_going() {
+            outcome = Outcome::Interrupted("stopped by the output".to_string());
+            break;
         }
         match solver.step(dt_s) {
             Ok(r) => report = Some(r),
@@ -405,19 +526,21 @@ fn run_in<const D: usize>(
     // state is not a consistent MPS state, the previous checkpoint stands).
     let failed = matches!(outcome, Outcome::Failed(_));
     if !failed && last_checkpoint_step != Some(solver.step) {
-        let msg = checkpoint::to_message(checkpoints.len() as u32, &solver, dt_s);
+        let msg = checkpoint::to_message(checkpoints.len() as u32, solver, dt_s);
         checkpoints.push(CheckpointHash {
             index: msg.index,
             step: msg.step,
             time_s: msg.time_s,
             state_sha256: msg.state_sha256.clone(),
         });
-        recorder.write_state(time_ns(solver.time_s), &msg)?;
-        recorder.write_diagnostics(
-            time_ns(solver.time_s),
-            &diagnostics(m, &solver, dt_s, report.as_ref()),
-        )?;
-        recorder.write_cloud(time_ns(solver.time_s), &cloud(&solver))?;
+        sink.checkpoint(time_ns(solver.time_s), &msg)?;
+        if frames {
+            sink.diagnostics(
+                time_ns(solver.time_s),
+                &diagnostics(m, solver, dt_s, report.as_ref()),
+            )?;
+            sink.cloud(time_ns(solver.time_s), &cloud(solver))?;
+        }
     }
 
     let p = &solver.particles;
@@ -440,13 +563,7 @@ fn run_in<const D: usize>(
         reason,
         metrics: metrics.into_iter().collect(),
         checkpoints,
-        experiment_sha256: resolved.hash_hex.clone(),
+        experiment_sha256: experiment_sha256.to_string(),
     };
-    let path = recorder.finish(time_ns(solver.time_s), &summary, &outcome)?;
-    Ok(RunResult {
-        path,
-        outcome,
-        summary,
-        wall_time_s: started.elapsed().as_secs_f64(),
-    })
+    Ok(LoopEnd { outcome, summary })
 }

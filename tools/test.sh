@@ -10,3 +10,21 @@ fi
 .venv/bin/pip install --quiet --disable-pip-version-check -r tools/requirements.txt
 export MPS_PYTHON="$PWD/.venv/bin/python"
 cargo test --release -- --include-ignored
+cargo build --release --bin runner
+
+# Determinism gate (README "Verify, resume, interrupts"): a small run on 1 and on 2 threads,
+# each replayed bit for bit by `runner verify`, and their checkpoint hashes compared.
+gate=$(mktemp -d)
+trap 'rm -rf "$gate"' EXIT
+runner=target/release/runner
+for t in 1 2; do
+    "$runner" experiments/smoke_2d.yaml --threads "$t" --out "$gate/t$t" --quiet > "$gate/path$t"
+    "$runner" verify "$(tail -n 1 "$gate/path$t")" --threads "$t" --quiet --print-hashes \
+        | tail -n +3 > "$gate/hashes$t"
+done
+if ! cmp -s "$gate/hashes1" "$gate/hashes2" || [ ! -s "$gate/hashes1" ]; then
+    echo "determinism gate FAILED: checkpoint hashes differ between 1 and 2 threads" >&2
+    diff "$gate/hashes1" "$gate/hashes2" >&2 || true
+    exit 1
+fi
+echo "determinism gate ok: $(wc -l < "$gate/hashes1") checkpoints identical on 1 and 2 threads, each verified"

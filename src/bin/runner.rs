@@ -1,14 +1,22 @@
 //! `runner`: the command line. Parses arguments, calls the library, and is the only place
 //! that turns results into exit codes: 0 success, 1 internal or I/O error, 2 bad input (CLI or
-//! manifest), 3 simulation failed, 130 interrupted.
+//! manifest), 3 simulation failed, 130 interrupted. `runner verify`: 0 identical, 1 not, 2 the
+//! file cannot be used.
 use clap::{Parser, Subcommand};
 use mps_runner::manifest;
 use mps_runner::record::Outcome;
+use mps_runner::resume::{ResumeError, ResumeOptions, resume};
 use mps_runner::run::{RunOptions, run};
+use mps_runner::verify::trend::{TrendOptions, trend};
+use mps_runner::verify::{VerifyOptions, verify};
 use std::path::PathBuf;
 use std::process::ExitCode;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 const EXIT_INTERNAL: u8 = 1;
+/// `runner verify`: the replay differs from the file (or the trend does not hold).
+const EXIT_MISMATCH: u8 = 1;
 const EXIT_BAD_INPUT: u8 = 2;
 const EXIT_SIM_FAILED: u8 = 3;
 const EXIT_INTERRUPTED: u8 = 130;
@@ -57,6 +65,47 @@ enum Command {
         #[arg(long)]
         canonical: bool,
     },
+    /// Replay a run from the manifest stored in its MCAP file and compare every checkpoint
+    /// bit for bit (exit 0 identical, 1 not, 2 file unusable); or, with --trend DIR, check
+    /// that a metric falls as a manifest value rises across the runs in DIR.
+    Verify(VerifyArgs),
+    /// Continue an interrupted (or killed, `.partial`) run from its last checkpoint.
+    Resume {
+        file: PathBuf,
+        #[arg(long)]
+        threads: Option<usize>,
+        #[arg(long, short)]
+        quiet: bool,
+    },
+}
+
+#[derive(clap::Args, Debug)]
+struct VerifyArgs {
+    /// Run file (.mcap or .mcap.partial).
+    #[arg(required_unless_present = "trend", conflicts_with = "trend")]
+    file: Option<PathBuf>,
+    /// Start from logged checkpoint K (restored) instead of the initial state.
+    #[arg(long, value_name = "K")]
+    from: Option<u32>,
+    /// Stop at logged checkpoint M (default: the last).
+    #[arg(long, value_name = "M")]
+    to: Option<u32>,
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Print the logged checkpoint hashes on stdout (index step time sha256), after the check.
+    #[arg(long)]
+    print_hashes: bool,
+    #[arg(long, short)]
+    quiet: bool,
+    /// Check the trend across the runs in DIR instead.
+    #[arg(long, value_name = "DIR")]
+    trend: Option<PathBuf>,
+    /// Manifest key on the x axis of --trend.
+    #[arg(long = "x", value_name = "KEY", default_value = mps_runner::verify::trend::DEFAULT_X)]
+    x_key: String,
+    /// Summary metric on the y axis of --trend.
+    #[arg(long = "y", value_name = "METRIC", default_value = mps_runner::verify::trend::DEFAULT_Y)]
+    y_metric: String,
 }
 
 fn main() -> ExitCode {
@@ -79,7 +128,143 @@ fn main() -> ExitCode {
                 ExitCode::from(EXIT_BAD_INPUT)
             }
         },
+        Some(Command::Verify(args)) => verify_command(args),
+        Some(Command::Resume {
+            file,
+            threads,
+            quiet,
+        }) => resume_command(&file, threads, quiet),
         None => run_command(cli.run),
+    }
+}
+
+/// SIGINT and SIGTERM set the returned flag: the run stops at the next step and finishes its
+/// file as interrupted (resumable). A second signal exits at once (the `.partial` file keeps
+/// every checkpoint written and can be resumed too).
+fn interrupt_flag() -> Option<Arc<AtomicBool>> {
+    let flag = Arc::new(AtomicBool::new(false));
+    let handler_flag = flag.clone();
+    let installed = ctrlc::set_handler(move || {
+        if handler_flag.swap(true, Ordering::SeqCst) {
+            eprintln!("second interrupt: exiting now; the .partial file can be resumed");
+            std::process::exit(i32::from(EXIT_INTERRUPTED));
+        }
+        eprintln!("interrupt: stopping after this step and finishing the file");
+    });
+    match installed {
+        Ok(()) => Some(flag),
+        Err(e) => {
+            eprintln!("warning: cannot install the signal handler: {e}");
+            None
+        }
+    }
+}
+
+fn outcome_code(outcome: &Outcome) -> ExitCode {
+    match outcome {
+        Outcome::Completed => ExitCode::SUCCESS,
+        Outcome::Failed(_) => ExitCode::from(EXIT_SIM_FAILED),
+        Outcome::Interrupted(_) => ExitCode::from(EXIT_INTERRUPTED),
+    }
+}
+
+fn verify_command(args: VerifyArgs) -> ExitCode {
+    if args.threads == Some(0) {
+        eprintln!("error: --threads must be at least 1");
+        return ExitCode::from(EXIT_BAD_INPUT);
+    }
+    if let Some(dir) = args.trend {
+        let options = TrendOptions {
+            x_key: args.x_key,
+            y_metric: args.y_metric,
+        };
+        return match trend(&dir, &options) {
+            Ok(report) => {
+                println!("{report}");
+                if report.passed() {
+                    ExitCode::SUCCESS
+                } else {
+                    ExitCode::from(EXIT_MISMATCH)
+                }
+            }
+            Err(e) => {
+                eprintln!("error: {e}");
+                ExitCode::from(EXIT_BAD_INPUT)
+            }
+        };
+    }
+    let file = args.file.expect("clap requires FILE without --trend");
+    let options = VerifyOptions {
+        from: args.from,
+        to: args.to,
+        threads: args.threads,
+        progress: !args.quiet,
+    };
+    match verify(&file, &options) {
+        Ok(report) => {
+            if let Some(w) = &report.build_warning {
+                eprintln!("warning: {w}");
+            }
+            println!("{report}");
+            if args.print_hashes {
+                for h in &report.hashes {
+                    println!("{} {} {:e} {}", h.index, h.step, h.time_s, h.state_sha256);
+                }
+            }
+            if report.passed() {
+                ExitCode::SUCCESS
+            } else {
+                ExitCode::from(EXIT_MISMATCH)
+            }
+        }
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::from(EXIT_BAD_INPUT)
+        }
+    }
+}
+
+fn resume_command(file: &std::path::Path, threads: Option<usize>, quiet: bool) -> ExitCode {
+    if threads == Some(0) {
+        eprintln!("error: --threads must be at least 1");
+        return ExitCode::from(EXIT_BAD_INPUT);
+    }
+    let options = ResumeOptions {
+        threads,
+        progress: !quiet,
+        interrupt: interrupt_flag(),
+    };
+    match resume(file, &options) {
+        Ok(r) => {
+            eprintln!(
+                "resumed from checkpoint {} (step {}, t = {} s, {} messages copied): {} at t = {} s; wall time {:.2} s",
+                r.from_checkpoint,
+                r.from_step,
+                r.from_time_s,
+                r.copied_messages,
+                r.result.outcome.as_str(),
+                r.result
+                    .summary
+                    .metrics
+                    .get("simulated_time_s")
+                    .copied()
+                    .unwrap_or(f64::NAN),
+                r.result.wall_time_s
+            );
+            if !r.result.summary.reason.is_empty() {
+                eprintln!("reason: {}", r.result.summary.reason);
+            }
+            println!("{}", r.result.path.display());
+            outcome_code(&r.result.outcome)
+        }
+        Err(e @ ResumeError::Unusable { .. }) => {
+            eprintln!("error: {e}");
+            ExitCode::from(EXIT_BAD_INPUT)
+        }
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::from(EXIT_INTERNAL)
+        }
     }
 }
 
@@ -105,7 +290,7 @@ fn run_command(args: RunArgs) -> ExitCode {
         out_dir: args.out,
         threads: args.threads,
         progress: !args.quiet,
-        interrupt: None,
+        interrupt: interrupt_flag(),
     };
     if !args.quiet {
         eprintln!(
@@ -136,11 +321,7 @@ fn run_command(args: RunArgs) -> ExitCode {
                 eprintln!("reason: {}", result.summary.reason);
             }
             println!("{}", result.path.display());
-            match result.outcome {
-                Outcome::Completed => ExitCode::SUCCESS,
-                Outcome::Failed(_) => ExitCode::from(EXIT_SIM_FAILED),
-                Outcome::Interrupted(_) => ExitCode::from(EXIT_INTERRUPTED),
-            }
+            outcome_code(&result.outcome)
         }
         Err(e) => {
             eprintln!("error: {e}");

@@ -250,6 +250,16 @@ impl Recorder {
         self.flush_and_sync()
     }
 
+    /// Writes one more metadata record (e.g. `resumed`). Writing metadata closes the current
+    /// chunk: call it right after [`create`](Recorder::create), before any message.
+    pub fn write_metadata(&mut self, name: &str, entries: &[(&str, &str)]) -> Result<()> {
+        self.writer
+            .as_mut()
+            .expect("writer present until finish")
+            .write_metadata(&metadata(name, entries))
+            .map_err(mcap_err(&self.partial))
+    }
+
     /// Writes a particle frame on `/particles` (see [`point_cloud`]).
     pub fn write_cloud(&mut self, log_time_ns: u64, msg: &PointCloud) -> Result<()> {
         self.write(SLOT_PARTICLES, log_time_ns, msg)

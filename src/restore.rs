@@ -1,0 +1,211 @@
+//! Taking a recorded run back up, for `runner verify` (replay) and `runner resume`: the
+//! manifest rebuilt from the canonical form stored in the file and checked against its hash,
+//! the messages in file order, and a solver restored from a logged checkpoint.
+use crate::checkpoint;
+use crate::manifest::{self, Manifest, Resolved};
+use crate::mps::Solver;
+use crate::proto::foxglove::PointCloud;
+use crate::proto::mps::v1::{Diagnostics, StateCheckpoint, Summary};
+use crate::record::{
+    META_MANIFEST, RunFile, TOPIC_DIAGNOSTICS, TOPIC_PARTICLES, TOPIC_STATE, TOPIC_SUMMARY,
+};
+use crate::run::{build_scene, solver_config};
+use mcap::read::{ChunkReader, LinearReader, Options};
+use mcap::records::Record;
+use prost::Message as _;
+use std::collections::BTreeMap;
+use std::path::Path;
+
+/// Why a recorded manifest cannot be taken back up.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ManifestCheck {
+    /// Nothing to rebuild from (no `manifest` metadata or no canonical form): the file is
+    /// unusable.
+    #[error("the file has no stored manifest ({0})")]
+    Missing(String),
+    /// The stored canonical form is not a valid manifest: the file is unusable.
+    #[error("the stored canonical manifest is not a valid manifest: {0}")]
+    Invalid(String),
+    /// The stored manifest does not hash to the recorded experiment hash, or its source text
+    /// with its overrides resolves to a different experiment: tampered or corrupted.
+    #[error("{0}")]
+    Mismatch(String),
+}
+
+/// Rebuilds the manifest of a run from the canonical form in its `manifest` metadata and
+/// checks it: its SHA-256 must equal the recorded `experiment_sha256` (and the summary's,
+/// when there is one), and the source text as written, with the recorded overrides, must
+/// resolve to the same hash. The result carries the recorded source text and overrides.
+pub fn manifest_of(run: &RunFile) -> Result<Resolved, ManifestCheck> {
+    let meta = run
+        .metadata
+        .get(META_MANIFEST)
+        .ok_or_else(|| ManifestCheck::Missing("no `manifest` metadata record".into()))?;
+    let field = |k: &str| {
+        meta.get(k)
+            .ok_or_else(|| ManifestCheck::Missing(format!("`manifest` metadata lacks `{k}`")))
+    };
+    let canonical = field("canonical")?;
+    let recorded = field("experiment_sha256")?;
+    let name = meta.get("name").map_or("manifest", |s| s.as_str());
+    let resolved = manifest::from_str(canonical, &format!("{name} (stored canonical)"), &[])
+        .map_err(|e| ManifestCheck::Invalid(e.to_string()))?;
+    if resolved.hash_hex != *recorded {
+        return Err(ManifestCheck::Mismatch(format!(
+            "manifest: the stored canonical form hashes to {}, but the file records experiment_sha256 {recorded}",
+            resolved.hash_hex
+        )));
+    }
+    if resolved.canonical != *canonical {
+        return Err(ManifestCheck::Mismatch(
+            "manifest: the stored canonical form is not in canonical form".into(),
+        ));
+    }
+    if let Some(s) = run
+        .summary
+        .as_ref()
+        .filter(|s| s.experiment_sha256 != *recorded)
+    {
+        return Err(ManifestCheck::Mismatch(format!(
+            "manifest: the summary records experiment_sha256 {}, the metadata {recorded}",
+            s.experiment_sha256
+        )));
+    }
+    let overrides: Vec<String> = match meta.get("overrides") {
+        Some(text) => serde_json::from_str(text).map_err(|e| {
+            ManifestCheck::Mismatch(format!(
+                "manifest: stored overrides are not a JSON list: {e}"
+            ))
+        })?,
+        None => Vec::new(),
+    };
+    let source = meta.get("source").cloned().unwrap_or_default();
+    match manifest::from_str(&source, &format!("{name} (stored source)"), &overrides) {
+        Ok(from_source) if from_source.hash_hex == *recorded => {}
+        Ok(from_source) => {
+            return Err(ManifestCheck::Mismatch(format!(
+                "manifest: the stored source text with overrides {overrides:?} resolves to experiment {}, but the file records {recorded}",
+                from_source.hash_hex
+            )));
+        }
+        Err(e) => {
+            return Err(ManifestCheck::Mismatch(format!(
+                "manifest: the stored source text no longer resolves: {e}"
+            )));
+        }
+    }
+    Ok(Resolved {
+        source_text: source,
+        overrides,
+        ..resolved
+    })
+}
+
+/// A solver holding the state of a logged checkpoint (step and time included), configured
+/// from the manifest. The checkpoint's stored hash must match its contents, and its `dt_s`
+/// must be the step the solver computes from that state. Call it inside the thread pool of
+/// the replay.
+pub fn restore_solver<const D: usize>(
+    m: &Manifest,
+    msg: &StateCheckpoint,
+) -> Result<Solver<D>, String> {
+    let recomputed = checkpoint::state_sha256(msg);
+    if recomputed != msg.state_sha256 {
+        return Err(format!(
+            "checkpoint {} (step {}, t = {} s): stored state_sha256 {} does not match its contents ({recomputed})",
+            msg.index, msg.step, msg.time_s, msg.state_sha256
+        ));
+    }
+    let scene = build_scene::<D>(m);
+    let config = solver_config(m, &scene);
+    let particles = checkpoint::particles_from_message::<D>(msg)?;
+    let mut solver = Solver::new(config, particles);
+    solver.time_s = msg.time_s;
+    solver.step = msg.step;
+    let dt = solver.next_dt_s(m.time.end_s);
+    if dt.to_bits() != msg.dt_s.to_bits() {
+        return Err(format!(
+            "checkpoint {} (step {}, t = {} s): its dt_s {:e} is not the step its state gives ({dt:e})",
+            msg.index, msg.step, msg.time_s, msg.dt_s
+        ));
+    }
+    Ok(solver)
+}
+
+/// Whether checkpoint `states[i]` was written by the checkpoint schedule (the first step
+/// that reached a multiple of `interval_s`), rather than as the extra final state of a run
+/// that stopped between two scheduled ones. Only the last checkpoint of a file can be such
+/// an extra. It is scheduled iff a multiple of the interval lies in (t_{i-1}, t_i]: the
+/// first step reaching that multiple would otherwise have written a checkpoint in between.
+pub fn is_scheduled(states: &[StateCheckpoint], i: usize, interval_s: f64) -> bool {
+    if i == 0 {
+        return states[0].step == 0;
+    }
+    let (before, t) = (states[i - 1].time_s, states[i].time_s);
+    let mut k = ((before / interval_s) as u64).saturating_sub(2);
+    while before >= k as f64 * interval_s {
+        k += 1;
+    }
+    t >= k as f64 * interval_s
+}
+
+/// One logged message, decoded.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Logged {
+    State(StateCheckpoint),
+    Diagnostics(Diagnostics),
+    Cloud(PointCloud),
+    Summary(Summary),
+}
+
+/// Every message of a run file in file order with its log time, up to the last complete
+/// chunk of an unfinished file. Check the file with [`crate::record::read_run`] first: this
+/// reader reports damage but does not re-check the layout.
+pub fn read_messages(path: &Path) -> Result<Vec<(u64, Logged)>, String> {
+    let err = |e: &dyn std::fmt::Display| format!("{}: {e}", path.display());
+    let buf = std::fs::read(path).map_err(|e| err(&e))?;
+    let complete = mcap::read::footer(&buf).is_ok();
+    let reader = if complete {
+        LinearReader::new(&buf)
+    } else {
+        LinearReader::new_with_options(&buf, Options::IgnoreEndMagic.into())
+    }
+    .map_err(|e| err(&e))?;
+    let mut topics: BTreeMap<u16, String> = BTreeMap::new();
+    let mut out = Vec::new();
+    let mut on_record = |record: Record, out: &mut Vec<(u64, Logged)>| -> Result<(), String> {
+        match record {
+            Record::Channel(c) => {
+                topics.insert(c.id, c.topic);
+            }
+            Record::Message { header, data } => {
+                let topic = topics.get(&header.channel_id).map_or("", |t| t.as_str());
+                let decoded = match topic {
+                    TOPIC_STATE => StateCheckpoint::decode(&data[..]).map(Logged::State),
+                    TOPIC_DIAGNOSTICS => Diagnostics::decode(&data[..]).map(Logged::Diagnostics),
+                    TOPIC_PARTICLES => PointCloud::decode(&data[..]).map(Logged::Cloud),
+                    TOPIC_SUMMARY => Summary::decode(&data[..]).map(Logged::Summary),
+                    _ => return Ok(()),
+                };
+                out.push((header.log_time, decoded.map_err(|e| err(&e))?));
+            }
+            _ => {}
+        }
+        Ok(())
+    };
+    for record in reader {
+        let record = match record {
+            Ok(r) => r,
+            Err(_) if !complete => break,
+            Err(e) => return Err(err(&e)),
+        };
+        if let Record::Chunk { header, data } = record {
+            for inner in ChunkReader::new(header, &data).map_err(|e| err(&e))? {
+                on_record(inner.map_err(|e| err(&e))?, &mut out)?;
+            }
+        } else {
+            on_record(record, &mut out)?;
+        }
+    }
+    Ok(out)
+}

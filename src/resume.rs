@@ -1,0 +1,265 @@
+//! `runner resume`: continue an interrupted run (finished with outcome `interrupted`) or a
+//! killed one (a `.partial` file) from its last checkpoint, into a new complete file at the
+//! run's usual path. The finished file is what an uninterrupted run would have written: the
+//! earlier checkpoints, diagnostics and clouds are copied over in order, the extra checkpoint
+//! an interruption writes between two scheduled ones is left out (its state is where the run
+//! continues from), and the time loop goes on with its output schedules positioned after
+//! the restored time. So the checkpoint hashes equal those of an uninterrupted run.
+use crate::checkpoint;
+use crate::manifest::Resolved;
+use crate::proto::mps::v1::{CheckpointHash, StateCheckpoint};
+use crate::record::{Recorder, RunHeader, partial_path, read_run};
+use crate::restore::{Logged, is_scheduled, manifest_of, read_messages, restore_solver};
+use crate::run::{LoopControl, LoopStart, RunError, RunResult, output_path, time_loop, time_ns};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
+
+/// Metadata record a resumed file carries (after `manifest`, `build`, `run`).
+pub const META_RESUMED: &str = "resumed";
+
+#[derive(Debug, Clone, Default)]
+pub struct ResumeOptions {
+    /// Worker threads; None = all cores.
+    pub threads: Option<usize>,
+    pub progress: bool,
+    /// Set from outside (signal handler) to stop cleanly as "interrupted".
+    pub interrupt: Option<Arc<AtomicBool>>,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum ResumeError {
+    /// The file cannot be resumed (unreadable, completed, failed, no checkpoint, tampered):
+    /// exit code 2.
+    #[error("{}: cannot resume: {reason}", path.display())]
+    Unusable { path: PathBuf, reason: String },
+    /// The new file could not be written: exit code 1.
+    #[error(transparent)]
+    Run(#[from] RunError),
+}
+
+/// A resumed run.
+#[derive(Debug, Clone)]
+pub struct Resumed {
+    pub result: RunResult,
+    /// The checkpoint the run continued from.
+    pub from_checkpoint: u32,
+    pub from_step: u64,
+    pub from_time_s: f64,
+    /// Messages copied from the earlier file.
+    pub copied_messages: usize,
+}
+
+/// Resumes the run recorded at `path`. See the module documentation.
+pub fn resume(path: &Path, options: &ResumeOptions) -> Result<Resumed, ResumeError> {
+    let unusable = |reason: String| ResumeError::Unusable {
+        path: path.to_path_buf(),
+        reason,
+    };
+    let run = read_run(path).map_err(|e| unusable(e.to_string()))?;
+    if run.complete {
+        match run.summary.as_ref().map(|s| s.outcome.as_str()) {
+            Some("interrupted") => {}
+            Some("completed") => return Err(unusable("the run is already completed".into())),
+            Some("failed") => {
+                return Err(unusable(
+                    "the run failed; resuming would repeat the failure".into(),
+                ));
+            }
+            other => return Err(unusable(format!("unexpected outcome {other:?}"))),
+        }
+    }
+    let resolved = manifest_of(&run).map_err(|e| unusable(e.to_string()))?;
+    let m = &resolved.manifest;
+    let Some(from) = run.states.last().cloned() else {
+        return Err(unusable("the file has no state checkpoint".into()));
+    };
+    let last = run.states.len() - 1;
+    let from_scheduled = is_scheduled(&run.states, last, m.output.checkpoint_interval_s);
+    let messages = read_messages(path).map_err(unusable)?;
+
+    // Everything logged before the checkpoint we continue from, in file order (for a
+    // scheduled checkpoint that includes the diagnostics and cloud of its own time, which
+    // the loop writes first; for an extra one, only the scheduled messages of its time).
+    let mut copy = Vec::new();
+    let mut states_seen = 0;
+    for (t, msg) in messages {
+        if let Logged::State(_) = msg {
+            if states_seen == last {
+                if from_scheduled {
+                    copy.push((t, msg));
+                }
+                break;
+            }
+            states_seen += 1;
+        }
+        if !matches!(msg, Logged::Summary(_)) {
+            copy.push((t, msg));
+        }
+    }
+    let checkpoints: Vec<CheckpointHash> = run.states[..last + usize::from(from_scheduled)]
+        .iter()
+        .map(|s| CheckpointHash {
+            index: s.index,
+            step: s.step,
+            time_s: s.time_s,
+            state_sha256: s.state_sha256.clone(),
+        })
+        .collect();
+    for (i, s) in run.states.iter().enumerate() {
+        if checkpoint::state_sha256(s) != s.state_sha256 || s.index as usize != i {
+            return Err(unusable(format!(
+                "checkpoint {i} does not match its stored hash or index: the file is damaged"
+            )));
+        }
+    }
+
+    let threads = options
+        .threads
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .map_err(|e| RunError::Threads {
+            threads,
+            message: e.to_string(),
+        })?;
+    let job = Job {
+        path,
+        complete: run.complete,
+        resolved: &resolved,
+        from: &from,
+        from_scheduled,
+        checkpoints,
+        copy: &copy,
+        threads,
+        options,
+    };
+    let result = pool.install(|| match m.dimension {
+        3 => resume_in::<3>(job),
+        _ => resume_in::<2>(job),
+    })?;
+    Ok(Resumed {
+        result,
+        from_checkpoint: from.index,
+        from_step: from.step,
+        from_time_s: from.time_s,
+        copied_messages: copy.len(),
+    })
+}
+
+struct Job<'a> {
+    path: &'a Path,
+    complete: bool,
+    resolved: &'a Resolved,
+    from: &'a StateCheckpoint,
+    from_scheduled: bool,
+    checkpoints: Vec<CheckpointHash>,
+    copy: &'a [(u64, Logged)],
+    threads: usize,
+    options: &'a ResumeOptions,
+}
+
+fn resume_in<const D: usize>(job: Job) -> Result<RunResult, ResumeError> {
+    let Job {
+        path,
+        complete,
+        resolved,
+        from,
+        from_scheduled,
+        checkpoints,
+        copy,
+        threads,
+        options,
+    } = job;
+    let m = &resolved.manifest;
+    let unusable = |reason: String| ResumeError::Unusable {
+        path: path.to_path_buf(),
+        reason,
+    };
+    let mut solver = restore_solver::<D>(m, from).map_err(unusable)?;
+
+    let dir = path.parent().map_or_else(PathBuf::new, Path::to_path_buf);
+    let final_path = output_path(&dir, resolved);
+    // A killed run's `.partial` is where the new file is written: move it aside first and
+    // delete it only once the new file is finished.
+    let source_aside = if path == partial_path(&final_path) {
+        let aside = PathBuf::from(format!("{}.resume-source", path.display()));
+        std::fs::rename(path, &aside).map_err(|e| unusable(format!("cannot move aside: {e}")))?;
+        Some(aside)
+    } else {
+        None
+    };
+    let header = RunHeader {
+        manifest_source: &resolved.source_text,
+        overrides: &resolved.overrides,
+        canonical: &resolved.canonical,
+        experiment_sha256: &resolved.hash_hex,
+        name: &m.name,
+        threads,
+    };
+    let started = std::time::Instant::now();
+    let mut recorder = Recorder::create(&final_path, &header).map_err(RunError::from)?;
+    let (index, step, time) = (
+        from.index.to_string(),
+        from.step.to_string(),
+        format!("{:e}", from.time_s),
+    );
+    recorder
+        .write_metadata(
+            META_RESUMED,
+            &[
+                ("from_checkpoint", &index),
+                ("from_step", &step),
+                ("from_time_s", &time),
+                (
+                    "source_outcome",
+                    if complete {
+                        "interrupted"
+                    } else {
+                        "unfinished"
+                    },
+                ),
+            ],
+        )
+        .map_err(RunError::from)?;
+    for (t, msg) in copy {
+        match msg {
+            Logged::State(s) => recorder.write_state(*t, s),
+            Logged::Diagnostics(d) => recorder.write_diagnostics(*t, d),
+            Logged::Cloud(c) => recorder.write_cloud(*t, c),
+            Logged::Summary(_) => Ok(()),
+        }
+        .map_err(RunError::from)?;
+    }
+    let control = LoopControl {
+        interrupt: options.interrupt.clone(),
+        progress: options.progress,
+        stop_at_step: None,
+    };
+    let start = LoopStart {
+        restored: true,
+        checkpoints,
+        last_checkpoint_step: from_scheduled.then_some(from.step),
+    };
+    let end = time_loop(
+        m,
+        &resolved.hash_hex,
+        &mut solver,
+        start,
+        &control,
+        &mut recorder,
+    )?;
+    let path = recorder
+        .finish(time_ns(solver.time_s), &end.summary, &end.outcome)
+        .map_err(RunError::from)?;
+    if let Some(aside) = source_aside {
+        let _ = std::fs::remove_file(aside);
+    }
+    Ok(RunResult {
+        path,
+        outcome: end.outcome,
+        summary: end.summary,
+        wall_time_s: started.elapsed().as_secs_f64(),
+    })
+}

@@ -1,0 +1,215 @@
+//! Interrupts and resume, end to end with the real binary: SIGINT (and SIGTERM) finish the
+//! file as interrupted, SIGKILL leaves a `.partial` file; `runner resume` on either gives the
+//! same checkpoint hashes (and as many diagnostics rows and clouds) as a run that was never
+//! interrupted.
+mod common;
+use assert_cmd::cargo::CommandCargoExt;
+use mps_runner::record::{RunFile, read_run};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+/// Long enough (about 2000 steps) to be interrupted well before its end.
+const SETS: [&str; 4] = ["--set", "time.end_s=2", "--threads", "2"];
+
+fn runner() -> Command {
+    Command::cargo_bin("runner").unwrap()
+}
+
+fn start(out: &Path) -> Child {
+    runner()
+        .arg(common::experiment("smoke_2d.yaml"))
+        .arg("--out")
+        .arg(out)
+        .args(SETS)
+        .arg("-q")
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap()
+}
+
+/// The `.partial` file of a run in `out`, once it holds at least `n` checkpoints.
+fn wait_for_checkpoints(out: &Path, n: usize) -> PathBuf {
+    let deadline = Instant::now() + Duration::from_secs(60);
+    loop {
+        assert!(Instant::now() < deadline, "no {n} checkpoints in time");
+        let partial = std::fs::read_dir(out).ok().and_then(|d| {
+            d.filter_map(|e| e.ok().map(|e| e.path()))
+                .find(|p| p.to_string_lossy().ends_with(".mcap.partial"))
+        });
+        if let Some(p) = partial.filter(|p| read_run(p).is_ok_and(|r| r.states.len() >= n)) {
+            return p;
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
+}
+
+fn signal(child: &Child, sig: &str) {
+    let status = Command::new("kill")
+        .args([sig, &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+}
+
+fn resume(path: &Path) -> PathBuf {
+    let out = runner()
+        .args(["resume", "-q", "--threads", "1"])
+        .arg(path)
+        .output()
+        .unwrap();
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    PathBuf::from(String::from_utf8(out.stdout).unwrap().trim())
+}
+
+fn verify_ok(path: &Path) {
+    let out = runner().args(["verify", "-q"]).arg(path).output().unwrap();
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stdout)
+    );
+}
+
+fn hashes(run: &RunFile) -> Vec<(u32, u64, u64, String)> {
+    run.summary
+        .as_ref()
+        .unwrap()
+        .checkpoints
+        .iter()
+        .map(|c| (c.index, c.step, c.time_s.to_bits(), c.state_sha256.clone()))
+        .collect()
+}
+
+fn assert_same_run(resumed: &RunFile, reference: &RunFile) {
+    assert!(resumed.complete);
+    assert_eq!(resumed.summary.as_ref().unwrap().outcome, "completed");
+    assert_eq!(hashes(resumed), hashes(reference));
+    assert_eq!(resumed.states, reference.states);
+    assert_eq!(resumed.diagnostics, reference.diagnostics);
+    assert_eq!(resumed.clouds, reference.clouds);
+    assert_eq!(
+        resumed.summary.as_ref().unwrap().metrics,
+        reference.summary.as_ref().unwrap().metrics
+    );
+    assert!(resumed.metadata.contains_key("resumed"));
+}
+
+fn only_file(dir: &Path) -> PathBuf {
+    let files: Vec<PathBuf> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    assert_eq!(files.len(), 1, "{files:?}");
+    files[0].clone()
+}
+
+#[test]
+fn resume_after_sigint_sigterm_and_sigkill_matches_an_uninterrupted_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let reference_dir = dir.path().join("uninterrupted");
+    let status = start(&reference_dir).wait().unwrap();
+    assert!(status.success());
+    let reference = read_run(&only_file(&reference_dir)).unwrap();
+    assert!(hashes(&reference).len() > 90);
+
+    for sig in ["-INT", "-TERM"] {
+        let out = dir.path().join(sig);
+        let mut child = start(&out);
+        wait_for_checkpoints(&out, 5);
+        signal(&child, sig);
+        let status = child.wait().unwrap();
+        assert_eq!(status.code(), Some(130), "{sig}");
+        // Finished, marked interrupted, final state checkpointed; it verifies as it stands.
+        let file = only_file(&out);
+        assert!(file.to_string_lossy().ends_with(".mcap"));
+        let interrupted = read_run(&file).unwrap();
+        assert!(interrupted.complete);
+        let summary = interrupted.summary.as_ref().unwrap();
+        assert_eq!(summary.outcome, "interrupted");
+        assert_eq!(interrupted.metadata["outcome"]["status"], "interrupted");
+        assert!(summary.checkpoints.len() < hashes(&reference).len());
+        assert_eq!(
+            interrupted.states.last().unwrap().step as f64,
+            summary.metrics["steps"],
+            "the last checkpoint is the state at the interruption"
+        );
+        verify_ok(&file);
+        let resumed = resume(&file);
+        assert_eq!(resumed, file, "same final path");
+        assert_same_run(&read_run(&resumed).unwrap(), &reference);
+        verify_ok(&resumed);
+        assert_eq!(only_file(&out), resumed);
+    }
+
+    let out = dir.path().join("kill");
+    let mut child = start(&out);
+    let partial = wait_for_checkpoints(&out, 5);
+    child.kill().unwrap(); // SIGKILL
+    child.wait().unwrap();
+    let killed = read_run(&partial).unwrap();
+    assert!(!killed.complete);
+    assert!(killed.states.len() >= 5);
+    verify_ok(&partial);
+    let resumed = resume(&partial);
+    assert_eq!(
+        resumed.to_string_lossy(),
+        partial.to_string_lossy().trim_end_matches(".partial")
+    );
+    assert_same_run(&read_run(&resumed).unwrap(), &reference);
+    // Nothing else left behind (no .partial, no moved-aside source).
+    assert_eq!(only_file(&out), resumed);
+}
+
+#[test]
+fn resume_refuses_a_completed_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let resolved = common::resolve("smoke_2d.yaml", &["time.end_s=0.02"]);
+    let path = common::run_in(&resolved, dir.path(), 1).path;
+    let out = runner().arg("resume").arg(&path).output().unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("already completed"));
+}
+
+#[test]
+fn an_interrupted_library_run_resumes_to_the_same_hashes() {
+    // Interrupt flag set before the run: it stops at step 0 after its first checkpoint.
+    use std::sync::Arc;
+    use std::sync::atomic::AtomicBool;
+    let dir = tempfile::tempdir().unwrap();
+    let resolved = common::resolve("smoke_2d.yaml", &[]);
+    let reference = common::run_in(&resolved, &dir.path().join("ref"), 2);
+    let out = dir.path().join("int");
+    let result = mps_runner::run::run(
+        &resolved,
+        &mps_runner::run::RunOptions {
+            out_dir: out.clone(),
+            threads: Some(2),
+            progress: false,
+            interrupt: Some(Arc::new(AtomicBool::new(true))),
+        },
+    )
+    .unwrap();
+    assert_eq!(result.summary.outcome, "interrupted");
+    assert_eq!(result.summary.checkpoints.len(), 1);
+    let resumed = mps_runner::resume::resume(
+        &result.path,
+        &mps_runner::resume::ResumeOptions {
+            threads: Some(1),
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    assert_eq!(resumed.from_checkpoint, 0);
+    assert_eq!(
+        resumed.result.summary.checkpoints,
+        reference.summary.checkpoints
+    );
+}

@@ -1,0 +1,369 @@
+//! `runner verify`: fresh runs verify, tampered files fail with a precise message, unusable
+//! files exit 2, segments replay.
+mod common;
+use assert_cmd::Command;
+use mps_runner::checkpoint::state_sha256;
+use mps_runner::record::{Outcome, Recorder, RunHeader, read_run};
+use mps_runner::restore::{Logged, read_messages};
+use mps_runner::verify::{VerifyOptions, verify};
+use std::path::{Path, PathBuf};
+
+fn runner() -> Command {
+    Command::cargo_bin("runner").unwrap()
+}
+
+/// A completed smoke run in `dir`.
+fn smoke_run(dir: &Path) -> PathBuf {
+    let resolved = common::resolve("smoke_2d.yaml", &[]);
+    common::run_in(&resolved, dir, 2).path
+}
+
+/// An edit of one checkpoint message.
+type StateEdit = Box<dyn Fn(&mut mps_runner::proto::mps::v1::StateCheckpoint)>;
+
+/// What a rewrite may change.
+#[derive(Default)]
+struct Edit {
+    /// (checkpoint index, edit applied to that checkpoint)
+    state: Option<(usize, StateEdit)>,
+    /// Recompute the edited checkpoint's stored hash and the summary's list (a careful forger).
+    rehash: bool,
+    canonical: Option<(String, String)>,
+    overrides: Option<Vec<String>>,
+    experiment_sha256: Option<String>,
+}
+
+/// Rewrites the run file `src` to `dst` through the Recorder, with `edit` applied.
+fn rewrite(src: &Path, dst: &Path, edit: Edit) {
+    let run = read_run(src).unwrap();
+    let meta = &run.metadata["manifest"];
+    let mut canonical = meta["canonical"].clone();
+    if let Some((from, to)) = &edit.canonical {
+        assert!(canonical.contains(from.as_str()), "{canonical}");
+        canonical = canonical.replace(from.as_str(), to);
+    }
+    let overrides: Vec<String> = edit
+        .overrides
+        .clone()
+        .unwrap_or_else(|| serde_json::from_str(&meta["overrides"]).unwrap());
+    let hash = edit
+        .experiment_sha256
+        .clone()
+        .unwrap_or_else(|| meta["experiment_sha256"].clone());
+    let header = RunHeader {
+        manifest_source: &meta["source"],
+        overrides: &overrides,
+        canonical: &canonical,
+        experiment_sha256: &hash,
+        name: &meta["name"],
+        threads: 1,
+    };
+    let mut rec = Recorder::create(dst, &header).unwrap();
+    let mut summary = None;
+    let mut index = 0;
+    let mut new_hash = None;
+    for (t, msg) in read_messages(src).unwrap() {
+        match msg {
+            Logged::State(mut s) => {
+                if let Some((_, f)) = edit.state.as_ref().filter(|(k, _)| *k == index) {
+                    f(&mut s);
+                    if edit.rehash {
+                        s.state_sha256 = state_sha256(&s);
+                        new_hash = Some(s.state_sha256.clone());
+                    }
+                }
+                index += 1;
+                rec.write_state(t, &s).unwrap();
+            }
+            Logged::Diagnostics(d) => rec.write_diagnostics(t, &d).unwrap(),
+            Logged::Cloud(c) => rec.write_cloud(t, &c).unwrap(),
+            Logged::Summary(s) => summary = Some((t, s)),
+        }
+    }
+    let (t, mut summary) = summary.unwrap();
+    if let (Some(h), Some((k, _))) = (new_hash, &edit.state) {
+        summary.checkpoints[*k].state_sha256 = h;
+    }
+    summary.experiment_sha256 = hash.clone();
+    let outcome = match summary.outcome.as_str() {
+        "completed" => Outcome::Completed,
+        "failed" => Outcome::Failed(summary.reason.clone()),
+        _ => Outcome::Interrupted(summary.reason.clone()),
+    };
+    rec.finish(t, &summary, &outcome).unwrap();
+}
+
+fn verify_cli(path: &Path) -> (i32, String) {
+    let out = runner().args(["verify", "-q"]).arg(path).output().unwrap();
+    let text = format!(
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    (out.status.code().unwrap(), text)
+}
+
+#[test]
+fn fresh_run_verifies_and_an_untouched_rewrite_too() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = smoke_run(dir.path());
+    let (code, text) = verify_cli(&path);
+    assert_eq!(code, 0, "{text}");
+    assert!(
+        text.contains("ok: 6 of 6 checkpoints identical bit for bit"),
+        "{text}"
+    );
+    assert!(text.contains("summary metrics identical"), "{text}");
+    assert!(
+        !text.contains("warning"),
+        "same build must not warn: {text}"
+    );
+    // The rewrite helper itself changes nothing that matters.
+    let copy = dir.path().join("copy.mcap");
+    rewrite(&path, &copy, Edit::default());
+    let (code, text) = verify_cli(&copy);
+    assert_eq!(code, 0, "{text}");
+}
+
+#[test]
+fn every_experiment_verifies_at_coarse_spacing() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut names: Vec<_> = std::fs::read_dir(common::root().join("experiments"))
+        .unwrap()
+        .map(|e| e.unwrap().file_name().into_string().unwrap())
+        .filter(|n| n.ends_with(".yaml"))
+        .collect();
+    names.sort();
+    assert!(!names.is_empty());
+    for name in names {
+        let resolved = common::resolve(
+            &name,
+            &[
+                "spacing_m=0.025",
+                "time.end_s=0.05",
+                "output.checkpoint_interval_s=0.01",
+            ],
+        );
+        let result = common::run_in(&resolved, dir.path(), 2);
+        let report = verify(
+            &result.path,
+            &VerifyOptions {
+                threads: Some(1),
+                ..VerifyOptions::default()
+            },
+        )
+        .unwrap();
+        assert!(report.passed(), "{name}: {report}");
+        assert!(report.summary_compared, "{name}: {report}");
+        assert_eq!(report.matched, result.summary.checkpoints.len(), "{report}");
+    }
+}
+
+#[test]
+fn segments_replay_from_a_logged_checkpoint() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = smoke_run(dir.path());
+    for (from, to, n) in [
+        (Some(0), Some(2), 2),
+        (Some(2), Some(4), 2),
+        (Some(3), None, 2),
+    ] {
+        let report = verify(
+            &path,
+            &VerifyOptions {
+                from,
+                to,
+                threads: Some(2),
+                progress: false,
+            },
+        )
+        .unwrap();
+        assert!(report.passed(), "{report}");
+        assert_eq!(report.matched, n, "{report}");
+        assert_eq!(report.summary_compared, to.is_none(), "{report}");
+    }
+    let out = runner()
+        .args(["verify", "-q", "--from", "5"])
+        .arg(&path)
+        .output()
+        .unwrap();
+    assert_eq!(
+        out.status.code(),
+        Some(2),
+        "nothing after the last checkpoint"
+    );
+}
+
+#[test]
+fn a_changed_checkpoint_value_is_caught_with_particle_field_and_values() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = smoke_run(dir.path());
+    let logged = read_run(&path).unwrap().states[2].velocity_m_s[7];
+    let bumped = f64::from_bits(logged.to_bits() + 1);
+    for rehash in [false, true] {
+        let tampered = dir.path().join(format!("tampered-{rehash}.mcap"));
+        rewrite(
+            &path,
+            &tampered,
+            Edit {
+                state: Some((2, Box::new(move |s| s.velocity_m_s[7] = bumped))),
+                rehash,
+                ..Edit::default()
+            },
+        );
+        let (code, text) = verify_cli(&tampered);
+        eprintln!("verify of a tampered checkpoint (rehash = {rehash}):\n{text}");
+        assert_eq!(code, 1, "{text}");
+        assert!(
+            text.contains("MISMATCH at checkpoint 2 (logged step 40"),
+            "{text}"
+        );
+        assert!(
+            text.contains("particle 3 (fluid) velocity_m_s[1]"),
+            "{text}"
+        );
+        assert!(
+            text.contains(&format!(
+                "logged {bumped:e} (bits 0x{:016x}), replayed {logged:e} (bits 0x{:016x})",
+                bumped.to_bits(),
+                logged.to_bits()
+            )),
+            "{text}"
+        );
+        assert!(
+            text.contains("FAILED: 2 of 6 checkpoints identical"),
+            "{text}"
+        );
+        // A naive edit also leaves a stored hash that no longer matches its state.
+        assert_eq!(
+            text.contains("stored state_sha256")
+                && text.contains("does not match the logged state"),
+            !rehash,
+            "{text}"
+        );
+    }
+}
+
+#[test]
+fn a_changed_stored_manifest_is_caught() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = smoke_run(dir.path());
+    let run = read_run(&path).unwrap();
+    let recorded = run.metadata["manifest"]["experiment_sha256"].clone();
+
+    // One value of the canonical manifest changed, hash left alone.
+    let tampered = dir.path().join("manifest.mcap");
+    rewrite(
+        &path,
+        &tampered,
+        Edit {
+            canonical: Some((
+                "\"gravity_m_s2\":9.81".into(),
+                "\"gravity_m_s2\":9.8".into(),
+            )),
+            ..Edit::default()
+        },
+    );
+    let (code, text) = verify_cli(&tampered);
+    eprintln!("verify of a tampered manifest:\n{text}");
+    assert_eq!(code, 1, "{text}");
+    let changed = common::resolve("smoke_2d.yaml", &["gravity_m_s2=9.8"]).hash_hex;
+    assert!(
+        text.contains(&format!(
+            "MISMATCH: manifest: the stored canonical form hashes to {changed}, but the file records experiment_sha256 {recorded}"
+        )),
+        "{text}"
+    );
+
+    // A consistent forgery (canonical, overrides and hash all changed): the replay is of a
+    // different experiment, and the first checkpoint after the initial state differs.
+    let forged = dir.path().join("forged.mcap");
+    let changed_canonical = common::resolve("smoke_2d.yaml", &["gravity_m_s2=9.8"]).canonical;
+    rewrite(
+        &path,
+        &forged,
+        Edit {
+            canonical: Some((
+                run.metadata["manifest"]["canonical"].clone(),
+                changed_canonical,
+            )),
+            overrides: Some(vec!["gravity_m_s2=9.8".into()]),
+            experiment_sha256: Some(changed),
+            ..Edit::default()
+        },
+    );
+    let (code, text) = verify_cli(&forged);
+    eprintln!("verify of a consistently forged manifest:\n{text}");
+    assert_eq!(code, 1, "{text}");
+    assert!(
+        text.contains("MISMATCH at checkpoint 1 (logged step 20"),
+        "{text}"
+    );
+    assert!(
+        text.contains("FAILED: 1 of 6 checkpoints identical"),
+        "{text}"
+    );
+}
+
+#[test]
+fn unusable_files_exit_2() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = dir.path().join("not.mcap");
+    std::fs::write(&text, "name: not an mcap file\n").unwrap();
+    let empty = dir.path().join("empty.mcap");
+    std::fs::write(&empty, "").unwrap();
+    // A run file cut before its first checkpoint: header and metadata only.
+    let resolved = common::resolve("smoke_2d.yaml", &[]);
+    let started = dir.path().join("started.mcap");
+    drop(
+        Recorder::create(
+            &started,
+            &RunHeader {
+                manifest_source: &resolved.source_text,
+                overrides: &[],
+                canonical: &resolved.canonical,
+                experiment_sha256: &resolved.hash_hex,
+                name: "smoke_2d",
+                threads: 1,
+            },
+        )
+        .unwrap(),
+    );
+    let started = PathBuf::from(format!("{}.partial", started.display()));
+    let missing = dir.path().join("missing.mcap");
+    for (path, needle) in [
+        (&text, "not.mcap"),
+        (&empty, "empty.mcap"),
+        (&started, "no state checkpoint"),
+        (&missing, "missing.mcap"),
+    ] {
+        let (code, out) = verify_cli(path);
+        assert_eq!(code, 2, "{}: {out}", path.display());
+        assert!(out.contains(needle), "{out}");
+    }
+    // Neither a file nor --trend: a usage error.
+    runner().arg("verify").assert().code(2);
+}
+
+#[test]
+fn print_hashes_lists_every_checkpoint() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = smoke_run(dir.path());
+    let out = runner()
+        .args(["verify", "-q", "--print-hashes", "--threads", "1"])
+        .arg(&path)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(0));
+    let stdout = String::from_utf8(out.stdout).unwrap();
+    let summary = read_run(&path).unwrap().summary.unwrap();
+    let lines: Vec<&str> = stdout.lines().skip(2).collect();
+    assert_eq!(lines.len(), summary.checkpoints.len());
+    for (line, c) in lines.iter().zip(&summary.checkpoints) {
+        assert!(
+            line.starts_with(&format!("{} {} ", c.index, c.step)),
+            "{line}"
+        );
+        assert!(line.ends_with(&c.state_sha256), "{line}");
+    }
+}
