@@ -4,5 +4,7 @@ pub mod manifest;
 pub mod mps;
 pub mod proto;
 pub mod record;
+pub mod report;
 pub mod run;
 pub mod scene;
+pub mod sweep_run;
