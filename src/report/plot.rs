@@ -1,7 +1,7 @@
 //! SVG charts with `plotters` (SVG backend: text as `<text>` elements, no font needed).
 //!
 //! Element conventions the tests rely on: every data series of a line plot is one
-//! `<polyline>`; sweep plots mark each data point with one `<circle>`; snapshot particles are
+//! `<polyline>` with `stroke-width="2"` (axes and ticks are 1 wide); sweep plots mark each data point with one `<circle>`; snapshot particles are
 //! `<circle>`s; legend swatches are `<rect>`s.
 
 use std::path::Path;
