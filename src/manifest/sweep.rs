@@ -299,13 +299,12 @@ fn value_text(v: &Value) -> String {
     serde_json::to_string(v).expect("JSON serializes")
 }
 
+/// Swept key -> (field path of the point's value in the sweep section, its location).
+type Locator<'a> = dyn Fn(&str) -> Option<(String, Option<Pos>)> + 'a;
+
 /// An error of resolving a point, about a swept key, located at the value in the sweep
 /// section instead of "--set KEY".
-fn relocate(
-    e: ManifestError,
-    source_name: &str,
-    at: &dyn Fn(&str) -> Option<(String, Option<Pos>)>,
-) -> ManifestError {
+fn relocate(e: ManifestError, source_name: &str, at: &Locator) -> ManifestError {
     match e {
         ManifestError::Override { key, message } => match at(&key) {
             Some((item, pos)) => ManifestError::Invalid {

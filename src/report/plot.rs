@@ -241,15 +241,17 @@ pub fn snapshot_plot(
     let walls: Vec<usize> = (0..pts.len())
         .filter(|&i| is_wall(i) && field != "kind")
         .collect();
-    chart
-        .draw_series(
-            walls
-                .iter()
-                .map(|&i| Circle::new(pts[i], radius, WALL_GREY.filled())),
-        )
-        .map_err(|x| e(&x))?
-        .label("wall")
-        .legend(|(x, y)| Rectangle::new([(x, y - 5), (x + 12, y + 5)], WALL_GREY.filled()));
+    if !walls.is_empty() {
+        chart
+            .draw_series(
+                walls
+                    .iter()
+                    .map(|&i| Circle::new(pts[i], radius, WALL_GREY.filled())),
+            )
+            .map_err(|x| e(&x))?
+            .label("wall")
+            .legend(|(x, y)| Rectangle::new([(x, y - 5), (x + 12, y + 5)], WALL_GREY.filled()));
+    }
     let others: Vec<usize> = (0..pts.len())
         .filter(|&i| !is_wall(i) || field == "kind")
         .collect();
