@@ -440,3 +440,15 @@ fn units_from_key_suffixes() {
         report::plot::Coloring::Categorical(vec![0, 1])
     );
 }
+
+#[test]
+fn only_the_points_need_to_be_valid() {
+    // The file's own end time is invalid; every point overrides it.
+    let text =
+        with_section("sweep:\n  time.end_s: [0.01, 0.02]\n").replace("end_s: 0.1", "end_s: -1");
+    assert!(manifest::from_str(&text, "x", &[]).is_err());
+    assert_eq!(sweep_of(&text, &[]).points.len(), 2);
+    // A YAML syntax error still has its usual location.
+    let e = sweep_err(&with_section("sweep:\n  gravity_m_s2: [1, 2\n"), &[]);
+    assert!(matches!(e, ManifestError::Syntax { .. }), "{e}");
+}

@@ -10,6 +10,8 @@
 //! - The points are the Cartesian product of the lists, keys in the order written, the
 //!   **last key varying fastest** (like nested loops written top to bottom), values in the
 //!   order written. The order is part of the sweep hash.
+//! - Only the points are resolved and validated (the manifest without the sweep need not be
+//!   valid by itself, e.g. a placeholder value that every point overrides).
 //! - Each point is resolved exactly as the manifest without its `sweep` section plus one
 //!   `--set KEY=VALUE` per swept key (after the command-line `--set`s): the same validation,
 //!   the same canonical form and experiment hash. [`super::from_str`] ignores the `sweep`
@@ -112,23 +114,29 @@ pub fn load_plan(path: &Path, overrides: &[String]) -> Result<Plan> {
 
 /// Like [`load_plan`], from text.
 pub fn plan_from_str(text: &str, source_name: &str, overrides: &[String]) -> Result<Plan> {
-    // Syntax errors and the like are reported by the plain loader, with their usual
-    // locations: resolve the base manifest first.
-    let base = from_str(text, source_name, overrides)?;
     let map = SourceMap::build(text);
+    let single = || from_str(text, source_name, overrides).map(|r| Plan::Single(Box::new(r)));
     let Some(entry) = map.entries.get(SWEEP_KEY) else {
-        return Ok(Plan::Single(Box::new(base)));
+        return single();
     };
     let sweep_pos = entry.key.0;
-    let doc: Top = serde_saphyr::from_str(text).map_err(|e| ManifestError::Syntax {
-        source_name: source_name.to_string(),
-        line: Some(sweep_pos.line),
-        column: Some(sweep_pos.column),
-        field: Some(SWEEP_KEY.to_string()),
-        message: super::saphyr_message(&e),
-    })?;
+    let doc: Top = match serde_saphyr::from_str(text) {
+        Ok(doc) => doc,
+        // Syntax errors come from the plain loader, with its locations.
+        Err(e) => {
+            single()?;
+            return Err(ManifestError::Syntax {
+                source_name: source_name.to_string(),
+                line: Some(sweep_pos.line),
+                column: Some(sweep_pos.column),
+                field: Some(SWEEP_KEY.to_string()),
+                message: super::saphyr_message(&e),
+            });
+        }
+    };
+    // Not a top-level `sweep` key after all (e.g. nested in a list).
     let Some(raw) = doc.sweep else {
-        return Ok(Plan::Single(Box::new(base)));
+        return single();
     };
     let invalid = |field: &str, pos: Option<Pos>, message: String| ManifestError::Invalid {
         source_name: source_name.to_string(),
@@ -279,9 +287,8 @@ pub fn plan_from_str(text: &str, source_name: &str, overrides: &[String]) -> Res
     let canonical = serde_json::to_string(&Value::Object(obj)).expect("JSON serializes");
     let hash_hex = canonical::sha256_hex(&canonical);
     Ok(Plan::Sweep(Sweep {
-        name: points.first().map_or(base.manifest.name.clone(), |p| {
-            p.resolved.manifest.name.clone()
-        }),
+        // Never empty: every axis has a value (no axes at all: one point).
+        name: points[0].resolved.manifest.name.clone(),
         axes,
         points,
         canonical,
