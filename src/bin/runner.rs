@@ -3,10 +3,12 @@
 //! manifest), 3 simulation failed, 130 interrupted. `runner verify`: 0 identical, 1 not, 2 the
 //! file cannot be used.
 use clap::{Parser, Subcommand};
-use mps_runner::manifest;
+use mps_runner::manifest::sweep;
 use mps_runner::record::Outcome;
+use mps_runner::report;
 use mps_runner::resume::{ResumeError, ResumeOptions, resume};
 use mps_runner::run::{RunOptions, run};
+use mps_runner::sweep_run::{SweepOptions, run_sweep};
 use mps_runner::verify::trend::{TrendOptions, trend};
 use mps_runner::verify::{VerifyOptions, verify};
 use std::path::PathBuf;
@@ -52,6 +54,10 @@ struct RunArgs {
     /// No progress lines on stderr.
     #[arg(long, short)]
     quiet: bool,
+    /// Sweeps only: summary metric(s) to plot into the sweep folder (repeatable; default:
+    /// every summary metric that is not a count or bookkeeping).
+    #[arg(long = "plot-y", value_name = "METRIC")]
+    plot_y: Vec<String>,
 }
 
 #[derive(Subcommand, Debug)]
@@ -76,6 +82,43 @@ enum Command {
         threads: Option<usize>,
         #[arg(long, short)]
         quiet: bool,
+    },
+    /// Plot a diagnostics quantity of one run against simulated time (SVG).
+    Plot {
+        run: PathBuf,
+        /// `Diagnostics.metrics` key or built-in field such as kinetic_energy_j (default:
+        /// the first metric).
+        #[arg(long)]
+        metric: Option<String>,
+        /// Output file (default: <run>-<metric>.svg beside the run).
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
+    /// Plot a summary metric of every run in a folder against a manifest value (SVG).
+    PlotSweep {
+        dir: PathBuf,
+        /// Dotted manifest key for the x axis, e.g. fluid.yield_stress_pa.
+        #[arg(long)]
+        x: String,
+        /// Summary metric for the y axis, e.g. front_position_m.
+        #[arg(long)]
+        y: String,
+        /// Dotted manifest key: one line per value.
+        #[arg(long)]
+        group: Option<String>,
+        /// Output file (default: DIR/sweep-<y>-vs-<x>.svg).
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
+    /// Draw the last particle frame of a run, coloured by a point field (SVG).
+    Snapshot {
+        run: PathBuf,
+        /// Point-cloud field to colour by (default: kind).
+        #[arg(long)]
+        field: Option<String>,
+        /// Output file (default: <run>-snapshot-<field>.svg beside the run).
+        #[arg(long)]
+        out: Option<PathBuf>,
     },
 }
 
@@ -115,12 +158,19 @@ fn main() -> ExitCode {
             manifest: path,
             set,
             canonical,
-        }) => match manifest::load(&path, &set) {
-            Ok(resolved) => {
+        }) => match sweep::load_plan(&path, &set) {
+            Ok(sweep::Plan::Single(resolved)) => {
                 if canonical {
                     println!("{}", resolved.canonical);
                 }
                 println!("{}", resolved.hash_hex);
+                ExitCode::SUCCESS
+            }
+            Ok(sweep::Plan::Sweep(s)) => {
+                if canonical {
+                    println!("{}", s.canonical);
+                }
+                println!("{}", s.hash_hex);
                 ExitCode::SUCCESS
             }
             Err(e) => {
@@ -134,6 +184,26 @@ fn main() -> ExitCode {
             threads,
             quiet,
         }) => resume_command(&file, threads, quiet),
+        Some(Command::Plot { run, metric, out }) => {
+            report_result(report::plot_run(&run, metric.as_deref(), out.as_deref()))
+        }
+        Some(Command::PlotSweep {
+            dir,
+            x,
+            y,
+            group,
+            out,
+        }) => report_result(
+            report::plot_sweep(&dir, &x, &y, group.as_deref(), out.as_deref()).map(|p| {
+                for (file, why) in &p.skipped {
+                    eprintln!("skipped {}: {why}", file.display());
+                }
+                p.path
+            }),
+        ),
+        Some(Command::Snapshot { run, field, out }) => {
+            report_result(report::snapshot(&run, field.as_deref(), out.as_deref()))
+        }
         None => run_command(cli.run),
     }
 }
@@ -268,8 +338,26 @@ fn resume_command(file: &std::path::Path, threads: Option<usize>, quiet: bool) -
     }
 }
 
+/// Prints the plot's path, or the error with its exit code.
+fn report_result(result: Result<PathBuf, report::ReportError>) -> ExitCode {
+    match result {
+        Ok(path) => {
+            println!("{}", path.display());
+            ExitCode::SUCCESS
+        }
+        Err(e @ report::ReportError::Write { .. }) => {
+            eprintln!("error: {e}");
+            ExitCode::from(EXIT_INTERNAL)
+        }
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::from(EXIT_BAD_INPUT)
+        }
+    }
+}
+
 fn run_command(args: RunArgs) -> ExitCode {
-    let Some(path) = args.manifest else {
+    let Some(path) = args.manifest.clone() else {
         eprintln!(
             "error: no manifest given (usage: runner <MANIFEST> [--out DIR] [--set KEY=VALUE]... [--threads N])"
         );
@@ -279,8 +367,9 @@ fn run_command(args: RunArgs) -> ExitCode {
         eprintln!("error: --threads must be at least 1");
         return ExitCode::from(EXIT_BAD_INPUT);
     }
-    let resolved = match manifest::load(&path, &args.set) {
-        Ok(r) => r,
+    let resolved = match sweep::load_plan(&path, &args.set) {
+        Ok(sweep::Plan::Single(r)) => *r,
+        Ok(sweep::Plan::Sweep(s)) => return sweep_command(&s, &args),
         Err(e) => {
             eprintln!("error: {e}");
             return ExitCode::from(EXIT_BAD_INPUT);
@@ -328,4 +417,91 @@ fn run_command(args: RunArgs) -> ExitCode {
             ExitCode::from(EXIT_INTERNAL)
         }
     }
+}
+
+/// Runs every point of a sweep (points concurrently, one thread each; `--threads` caps the
+/// concurrent points), prints one line per finished point, plots the results into the sweep
+/// folder, and prints the folder last. Exit 0 when every point completed, 3 when any failed,
+/// 1 when a file could not be written, 130 when interrupted.
+fn sweep_command(s: &sweep::Sweep, args: &RunArgs) -> ExitCode {
+    let total = s.points.len();
+    if !args.quiet {
+        eprintln!(
+            "{}: sweep {} of {total} points over {}",
+            s.name,
+            s.hash_hex,
+            s.axes
+                .iter()
+                .map(|a| a.key.as_str())
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    }
+    let options = SweepOptions {
+        out_dir: args.out.clone(),
+        workers: args.threads,
+        interrupt: interrupt_flag(),
+    };
+    let on_done = |o: &mps_runner::sweep_run::PointOutcome| match &o.result {
+        Ok(r) => {
+            println!(
+                "[{}/{total}] {} {} {}",
+                o.index + 1,
+                o.label,
+                r.outcome.as_str(),
+                r.path.display()
+            );
+            if !r.summary.reason.is_empty() && !args.quiet {
+                eprintln!("[{}/{total}] reason: {}", o.index + 1, r.summary.reason);
+            }
+        }
+        Err(e) => println!("[{}/{total}] {} error {e}", o.index + 1, o.label),
+    };
+    let (dir, outcomes) = run_sweep(s, &options, &on_done);
+
+    // The sweep plot: x = the first numeric axis, groups = the other axes' values.
+    let numeric = |a: &sweep::Axis| a.values.iter().all(serde_json::Value::is_number);
+    if let Some(x) = s.axes.iter().find(|a| numeric(a)) {
+        let others: Vec<&str> = s
+            .axes
+            .iter()
+            .filter(|a| a.key != x.key)
+            .map(|a| a.key.as_str())
+            .collect();
+        let metrics = if args.plot_y.is_empty() {
+            outcomes
+                .iter()
+                .find_map(|o| o.result.as_ref().ok())
+                .map(|r| report::default_sweep_metrics(&r.summary.metrics))
+                .unwrap_or_default()
+        } else {
+            args.plot_y.clone()
+        };
+        // Only one grouping key fits a legend: group by the first other axis.
+        let group = others.first().copied();
+        for y in metrics {
+            match report::plot_sweep(&dir, &x.key, &y, group, None) {
+                Ok(p) => {
+                    if !args.quiet {
+                        eprintln!("plot: {}", p.path.display());
+                    }
+                }
+                Err(e) => eprintln!("warning: no sweep plot of {y}: {e}"),
+            }
+        }
+    }
+
+    println!("{}", dir.display());
+    let mut code = ExitCode::SUCCESS;
+    for o in &outcomes {
+        match &o.result {
+            Ok(r) => match r.outcome {
+                Outcome::Completed => {}
+                Outcome::Failed(_) => code = ExitCode::from(EXIT_SIM_FAILED),
+                Outcome::Interrupted(_) => return ExitCode::from(EXIT_INTERRUPTED),
+            },
+            Err(_) => return ExitCode::from(EXIT_INTERNAL),
+        }
+    }
+    code
 }

@@ -1,6 +1,8 @@
 //! Experiment manifests: typed YAML, validation, `--set` overrides, canonical form and hash.
 //!
 //! Pipeline of [`from_str`] / [`load`]:
+//! 0. a top-level `sweep` section is blanked out ([`sweep`] expands it; [`sweep::load_plan`]
+//!    is the entry point for files that may carry one);
 //! 1. the YAML text is deserialized into a typed [`Manifest`] by serde-saphyr (unknown
 //!    fields, missing fields, wrong types and YAML syntax errors come back as
 //!    [`ManifestError::Syntax`] with line, column and, where it can be found, the field path);
@@ -15,6 +17,7 @@ pub mod canonical;
 mod error;
 mod locate;
 mod overrides;
+pub mod sweep;
 mod types;
 pub mod validate;
 
@@ -60,7 +63,11 @@ pub fn load(path: &Path, overrides: &[String]) -> Result<Resolved> {
 }
 
 /// Like [`load`], from text; `source_name` is used in error messages.
+/// A top-level `sweep` section is ignored here (blanked out, see [`sweep`]); `source_text`
+/// keeps it.
 pub fn from_str(text: &str, source_name: &str, overrides: &[String]) -> Result<Resolved> {
+    let full_text = text;
+    let text: &str = &sweep::strip(full_text);
     let parsed: Manifest = serde_saphyr::from_str_with_options(text, yaml_options())
         .map_err(|e| syntax_error(&e, source_name, text))?;
 
@@ -109,7 +116,7 @@ pub fn from_str(text: &str, source_name: &str, overrides: &[String]) -> Result<R
     let hash_hex = canonical::sha256_hex(&canonical);
     Ok(Resolved {
         manifest,
-        source_text: text.to_string(),
+        source_text: full_text.to_string(),
         overrides: overrides.to_vec(),
         canonical,
         hash_hex,

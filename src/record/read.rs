@@ -21,6 +21,8 @@ pub struct RunFile {
     pub diagnostics: Vec<Diagnostics>,
     /// Number of `/particles` frames (each one decoded to check it).
     pub clouds: usize,
+    /// The last `/particles` frame, decoded (for snapshots).
+    pub last_cloud: Option<PointCloud>,
     pub summary: Option<Summary>,
     /// The file has its summary section and footer (the recorder finished it). When false,
     /// the fields above hold what the completed chunks contain.
@@ -162,7 +164,7 @@ fn on_message(
             .states
             .push(StateCheckpoint::decode(data).map_err(decode_err)?),
         TOPIC_PARTICLES => {
-            PointCloud::decode(data).map_err(decode_err)?;
+            run.last_cloud = Some(PointCloud::decode(data).map_err(decode_err)?);
             run.clouds += 1;
         }
         TOPIC_DIAGNOSTICS => run

@@ -1,0 +1,382 @@
+//! Reports made from recorded runs: SVG plots of diagnostics, sweep results and particle
+//! snapshots (`runner plot`, `runner plot-sweep`, `runner snapshot`).
+//!
+//! Plots are SVG, drawn with `plotters`' SVG backend: text is written as SVG `<text>`
+//! elements, so no font has to be found or rasterised (no fontconfig/freetype, nothing to
+//! install, no font file to ship).
+
+pub mod cloud;
+pub mod plot;
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use serde_json::Value;
+
+use crate::manifest::sweep::lookup;
+use crate::proto::mps::v1::Diagnostics;
+use crate::record::{META_MANIFEST, RecordError, RunFile, read_run};
+use plot::Series;
+
+/// Why a report could not be made.
+#[derive(Debug, thiserror::Error)]
+pub enum ReportError {
+    /// Bad request: unknown metric or key, nothing to plot, not a run file.
+    #[error("{0}")]
+    Input(String),
+    /// A run file could not be read.
+    #[error(transparent)]
+    Read(#[from] RecordError),
+    /// The plot could not be written.
+    #[error("cannot write {path}: {message}")]
+    Write { path: PathBuf, message: String },
+}
+
+pub type Result<T, E = ReportError> = std::result::Result<T, E>;
+
+/// Built-in `Diagnostics` fields that can be plotted by name, besides `metrics[...]`.
+pub const DIAGNOSTICS_FIELDS: &[&str] = &[
+    "kinetic_energy_j",
+    "max_speed_m_s",
+    "dt_s",
+    "ppe_iterations",
+    "ppe_relative_residual",
+    "surface_particle_count",
+    "fluid_particle_count",
+    "step",
+];
+
+/// The value of diagnostics field or metric `name` in one row.
+pub fn diagnostics_value(d: &Diagnostics, name: &str) -> Option<f64> {
+    Some(match name {
+        "kinetic_energy_j" => d.kinetic_energy_j,
+        "max_speed_m_s" => d.max_speed_m_s,
+        "dt_s" => d.dt_s,
+        "ppe_iterations" => d.ppe_iterations.into(),
+        "ppe_relative_residual" => d.ppe_relative_residual,
+        "surface_particle_count" => d.surface_particle_count.into(),
+        "fluid_particle_count" => d.fluid_particle_count.into(),
+        "step" => d.step.into(),
+        "time_s" => d.time_s,
+        _ => return d.metrics.get(name).copied(),
+    })
+}
+
+/// Default diagnostics quantity of a run: its first experiment metric (by name), else
+/// `kinetic_energy_j`.
+pub fn default_metric(run: &RunFile) -> String {
+    run.diagnostics
+        .iter()
+        .find_map(|d| d.metrics.keys().next().cloned())
+        .unwrap_or_else(|| "kinetic_energy_j".to_string())
+}
+
+/// `(time_s, value)` of diagnostics quantity `name`, for every row that has it.
+pub fn diagnostics_series(run: &RunFile, name: &str) -> Vec<(f64, f64)> {
+    run.diagnostics
+        .iter()
+        .filter_map(|d| diagnostics_value(d, name).map(|v| (d.time_s, v)))
+        .collect()
+}
+
+/// The run's resolved manifest (its stored canonical form) as JSON.
+pub fn canonical_manifest(run: &RunFile) -> Option<Value> {
+    let text = run.metadata.get(META_MANIFEST)?.get("canonical")?;
+    serde_json::from_str(text).ok()
+}
+
+/// The value at dotted `key` of the run's resolved manifest.
+pub fn manifest_value(run: &RunFile, key: &str) -> Option<Value> {
+    canonical_manifest(run).and_then(|m| lookup(&m, key).cloned())
+}
+
+/// `name (short hash)` of a run, for titles.
+pub fn run_title(run: &RunFile) -> String {
+    let meta = run.metadata.get(META_MANIFEST);
+    let name = meta
+        .and_then(|m| m.get("name"))
+        .map_or("run", |s| s.as_str());
+    let hash = meta
+        .and_then(|m| m.get("experiment_sha256"))
+        .map_or("", |s| &s[..s.len().min(12)]);
+    format!("{name} {hash}")
+}
+
+/// The unit of a quantity named with a unit suffix (`front_position_m` -> `m`), if known.
+pub fn unit_of(name: &str) -> Option<&'static str> {
+    const SUFFIXES: &[(&str, &str)] = &[
+        ("_kg_m3", "kg/m³"),
+        ("_m_s2", "m/s²"),
+        ("_m_s", "m/s"),
+        ("_pa_s", "Pa s"),
+        ("_1_pa", "1/Pa"),
+        ("_pa", "Pa"),
+        ("_ms", "ms"),
+        ("_m", "m"),
+        ("_s", "s"),
+        ("_j", "J"),
+        ("_kg", "kg"),
+    ];
+    let last = name.rsplit('.').next().unwrap_or(name);
+    SUFFIXES
+        .iter()
+        .find(|(suffix, _)| last.ends_with(suffix))
+        .map(|(_, unit)| *unit)
+}
+
+/// Axis label: the name with its unit in brackets (`[-]` when unitless).
+pub fn axis_label(name: &str) -> String {
+    format!("{name} [{}]", unit_of(name).unwrap_or("-"))
+}
+
+/// A short file-name-safe form of `s`.
+fn slug(s: &str) -> String {
+    s.chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' || c == '_' || c == '.' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect()
+}
+
+/// `path` without its `.mcap` extension, plus `suffix`.
+fn beside(path: &Path, suffix: &str) -> PathBuf {
+    let stem = path
+        .file_stem()
+        .map_or_else(|| "run".into(), |s| s.to_string_lossy().into_owned());
+    path.with_file_name(format!("{stem}{suffix}"))
+}
+
+fn read(path: &Path) -> Result<RunFile> {
+    Ok(read_run(path)?)
+}
+
+/// `runner plot`: diagnostics quantity `metric` (default [`default_metric`]) against
+/// simulated time. Default output: `<run>-<metric>.svg` beside the run file.
+pub fn plot_run(mcap: &Path, metric: Option<&str>, out: Option<&Path>) -> Result<PathBuf> {
+    let run = read(mcap)?;
+    let metric = metric.map_or_else(|| default_metric(&run), str::to_string);
+    let points = diagnostics_series(&run, &metric);
+    if points.is_empty() {
+        let mut known: Vec<String> = DIAGNOSTICS_FIELDS.iter().map(|s| s.to_string()).collect();
+        if let Some(d) = run.diagnostics.first() {
+            known.extend(d.metrics.keys().cloned());
+        }
+        return Err(ReportError::Input(format!(
+            "{}: no diagnostics value `{metric}`; known: {}",
+            mcap.display(),
+            known.join(", ")
+        )));
+    }
+    let out = out.map_or_else(
+        || beside(mcap, &format!("-{}.svg", slug(&metric))),
+        Path::to_path_buf,
+    );
+    plot::line_plot(
+        &out,
+        &format!("{}: {metric}", run_title(&run)),
+        &axis_label("time_s"),
+        &axis_label(&metric),
+        &[Series {
+            label: metric.clone(),
+            points,
+        }],
+        false,
+    )?;
+    Ok(out)
+}
+
+/// A manifest value as a number: numbers as they are, booleans as 0/1.
+fn as_number(v: &Value) -> Option<f64> {
+    match v {
+        Value::Number(n) => n.as_f64(),
+        Value::Bool(b) => Some(f64::from(u8::from(*b))),
+        _ => None,
+    }
+}
+
+/// What [`plot_sweep`] drew.
+#[derive(Debug, Clone)]
+pub struct SweepPlot {
+    pub path: PathBuf,
+    /// Group label -> number of points.
+    pub groups: BTreeMap<String, usize>,
+    /// Run files left out (unreadable, unfinished, or without the metric) and why.
+    pub skipped: Vec<(PathBuf, String)>,
+}
+
+/// The finished run files (`*.mcap`) of a folder, sorted by name.
+pub fn run_files(dir: &Path) -> Result<Vec<PathBuf>> {
+    let entries = std::fs::read_dir(dir)
+        .map_err(|e| ReportError::Input(format!("{}: cannot read folder: {e}", dir.display())))?;
+    let mut files: Vec<PathBuf> = entries
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x == "mcap"))
+        .collect();
+    files.sort();
+    Ok(files)
+}
+
+/// `runner plot-sweep`: summary metric `y` of every completed run in `dir` against manifest
+/// value `x`, one line per value of manifest key `group` (if given). Default output:
+/// `DIR/sweep-<y>-vs-<x>.svg`.
+pub fn plot_sweep(
+    dir: &Path,
+    x: &str,
+    y: &str,
+    group: Option<&str>,
+    out: Option<&Path>,
+) -> Result<SweepPlot> {
+    let mut groups: BTreeMap<String, Vec<(f64, f64)>> = BTreeMap::new();
+    let mut skipped = Vec::new();
+    let mut title = None;
+    for file in run_files(dir)? {
+        let run = match read_run(&file) {
+            Ok(r) => r,
+            Err(e) => {
+                skipped.push((file, e.to_string()));
+                continue;
+            }
+        };
+        let Some(summary) = run.summary.as_ref().filter(|s| s.outcome == "completed") else {
+            skipped.push((file, "not a completed run".into()));
+            continue;
+        };
+        let Some(manifest) = canonical_manifest(&run) else {
+            skipped.push((file, "no canonical manifest in its metadata".into()));
+            continue;
+        };
+        let Some(xv) = lookup(&manifest, x) else {
+            return Err(ReportError::Input(format!(
+                "{}: the manifest has no key `{x}`",
+                file.display()
+            )));
+        };
+        let Some(xv) = as_number(xv) else {
+            return Err(ReportError::Input(format!(
+                "{}: `{x}` = {xv} is not a number",
+                file.display()
+            )));
+        };
+        let Some(&yv) = summary.metrics.get(y) else {
+            skipped.push((file, format!("no summary metric `{y}`")));
+            continue;
+        };
+        let label = match group {
+            Some(g) => match lookup(&manifest, g) {
+                Some(v) => format!("{g}={}", value_text(v)),
+                None => {
+                    return Err(ReportError::Input(format!(
+                        "{}: the manifest has no key `{g}`",
+                        file.display()
+                    )));
+                }
+            },
+            None => y.to_string(),
+        };
+        title.get_or_insert_with(|| {
+            manifest
+                .get("name")
+                .and_then(Value::as_str)
+                .unwrap_or("sweep")
+                .to_string()
+        });
+        groups.entry(label).or_default().push((xv, yv));
+    }
+    if groups.is_empty() {
+        return Err(ReportError::Input(format!(
+            "{}: no completed run with summary metric `{y}`",
+            dir.display()
+        )));
+    }
+    let series: Vec<Series> = groups
+        .into_iter()
+        .map(|(label, mut points)| {
+            points.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.total_cmp(&b.1)));
+            Series { label, points }
+        })
+        .collect();
+    let out = out.map_or_else(
+        || dir.join(format!("sweep-{}-vs-{}.svg", slug(y), slug(x))),
+        Path::to_path_buf,
+    );
+    let folder = dir
+        .file_name()
+        .map_or_else(String::new, |s| s.to_string_lossy().into_owned());
+    let name = title.unwrap_or_default();
+    let title = if folder.is_empty() || folder == name {
+        format!("{name}: {y} vs {x}")
+    } else {
+        format!("{folder}: {y} vs {x}")
+    };
+    plot::line_plot(&out, &title, &axis_label(x), &axis_label(y), &series, true)?;
+    Ok(SweepPlot {
+        path: out,
+        groups: series
+            .iter()
+            .map(|s| (s.label.clone(), s.points.len()))
+            .collect(),
+        skipped,
+    })
+}
+
+/// A scalar as plain text (strings without quotes).
+fn value_text(v: &Value) -> String {
+    match v {
+        Value::String(s) => s.clone(),
+        v => v.to_string(),
+    }
+}
+
+/// Summary metrics worth plotting by default after a sweep: all but counts and
+/// bookkeeping (`*_count`, `steps`, `simulated_time_s`).
+pub fn default_sweep_metrics(metrics: &BTreeMap<String, f64>) -> Vec<String> {
+    metrics
+        .keys()
+        .filter(|k| !k.ends_with("_count") && *k != "steps" && *k != "simulated_time_s")
+        .cloned()
+        .collect()
+}
+
+/// `runner snapshot`: the last `/particles` frame of a run, coloured by `field` (default
+/// `kind`). Default output: `<run>-snapshot-<field>.svg` beside the run file.
+pub fn snapshot(mcap: &Path, field: Option<&str>, out: Option<&Path>) -> Result<PathBuf> {
+    let run = read(mcap)?;
+    let Some(pc) = run.last_cloud.as_ref() else {
+        return Err(ReportError::Input(format!(
+            "{}: no /particles frame",
+            mcap.display()
+        )));
+    };
+    let frame = cloud::Frame::decode(pc)
+        .map_err(|e| ReportError::Input(format!("{}: /particles: {e}", mcap.display())))?;
+    let field = field.unwrap_or("kind");
+    if !frame.fields.contains_key(field) {
+        return Err(ReportError::Input(format!(
+            "{}: the point cloud has no field `{field}`; fields: {}",
+            mcap.display(),
+            frame.fields.keys().cloned().collect::<Vec<_>>().join(", ")
+        )));
+    }
+    let dimension = manifest_value(&run, "dimension")
+        .and_then(|v| v.as_u64())
+        .unwrap_or(if frame.z.iter().all(|z| *z == 0.0) {
+            2
+        } else {
+            3
+        });
+    let out = out.map_or_else(
+        || beside(mcap, &format!("-snapshot-{}.svg", slug(field))),
+        Path::to_path_buf,
+    );
+    let time = pc
+        .timestamp
+        .as_ref()
+        .map_or(0.0, |t| t.seconds as f64 + f64::from(t.nanos) * 1e-9);
+    let title = format!("{} at t = {time} s: {field}", run_title(&run));
+    plot::snapshot_plot(&out, &title, &frame, field, dimension == 3)?;
+    Ok(out)
+}

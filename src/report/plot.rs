@@ -1,0 +1,323 @@
+//! SVG charts with `plotters` (SVG backend: text as `<text>` elements, no font needed).
+//!
+//! Element conventions the tests rely on: every data series of a line plot is one
+//! `<polyline>` with `stroke-width="2"` (axes and ticks are 1 wide); sweep plots mark each data point with one `<circle>`; snapshot particles are
+//! `<circle>`s; legend swatches are `<rect>`s.
+
+use std::path::Path;
+
+use plotters::prelude::*;
+
+use super::cloud::Frame;
+use super::{ReportError, Result};
+
+/// One line of a chart.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Series {
+    pub label: String,
+    pub points: Vec<(f64, f64)>,
+}
+
+/// Distinct colours for series and categories (Tableau 10).
+pub const PALETTE: [RGBColor; 10] = [
+    RGBColor(31, 119, 180),
+    RGBColor(255, 127, 14),
+    RGBColor(44, 160, 44),
+    RGBColor(214, 39, 40),
+    RGBColor(148, 103, 189),
+    RGBColor(140, 86, 75),
+    RGBColor(227, 119, 194),
+    RGBColor(188, 189, 34),
+    RGBColor(23, 190, 207),
+    RGBColor(127, 127, 127),
+];
+
+/// Wall particles.
+pub const WALL_GREY: RGBColor = RGBColor(170, 170, 170);
+
+fn write_err(path: &Path) -> impl Fn(String) -> ReportError + '_ {
+    move |message| ReportError::Write {
+        path: path.to_path_buf(),
+        message,
+    }
+}
+
+/// `[lo, hi]` padded by 5 % (or by 1 around a single value).
+fn padded(lo: f64, hi: f64) -> (f64, f64) {
+    if !(lo.is_finite() && hi.is_finite()) {
+        return (0.0, 1.0);
+    }
+    let span = hi - lo;
+    if span <= 0.0 {
+        let d = if lo == 0.0 { 1.0 } else { lo.abs() * 0.1 };
+        (lo - d, hi + d)
+    } else {
+        (lo - 0.05 * span, hi + 0.05 * span)
+    }
+}
+
+fn bounds(points: impl Iterator<Item = (f64, f64)>) -> ((f64, f64), (f64, f64)) {
+    let (mut x0, mut x1, mut y0, mut y1) = (
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+    );
+    for (x, y) in points.filter(|(x, y)| x.is_finite() && y.is_finite()) {
+        x0 = x0.min(x);
+        x1 = x1.max(x);
+        y0 = y0.min(y);
+        y1 = y1.max(y);
+    }
+    (padded(x0, x1), padded(y0, y1))
+}
+
+/// A line chart: one `<polyline>` per series (plus one `<circle>` per point when `markers`),
+/// a legend when there is more than one series or `markers` is on.
+pub fn line_plot(
+    path: &Path,
+    title: &str,
+    x_label: &str,
+    y_label: &str,
+    series: &[Series],
+    markers: bool,
+) -> Result<()> {
+    let err = write_err(path);
+    let e = |x: &dyn std::fmt::Display| err(x.to_string());
+    let ((x0, x1), (y0, y1)) = bounds(series.iter().flat_map(|s| s.points.iter().copied()));
+    let root = SVGBackend::new(path, (900, 600)).into_drawing_area();
+    root.fill(&WHITE).map_err(|x| e(&x))?;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(title, ("sans-serif", 22))
+        .margin(15)
+        .x_label_area_size(50)
+        .y_label_area_size(80)
+        .build_cartesian_2d(x0..x1, y0..y1)
+        .map_err(|x| e(&x))?;
+    chart
+        .configure_mesh()
+        .x_desc(x_label)
+        .y_desc(y_label)
+        .light_line_style(WHITE.mix(0.0))
+        .draw()
+        .map_err(|x| e(&x))?;
+    for (i, s) in series.iter().enumerate() {
+        let color = PALETTE[i % PALETTE.len()];
+        let drawn = chart
+            .draw_series(LineSeries::new(
+                s.points.iter().copied(),
+                color.stroke_width(2),
+            ))
+            .map_err(|x| e(&x))?;
+        drawn
+            .label(s.label.clone())
+            .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 14, y + 5)], color.filled()));
+        if markers {
+            chart
+                .draw_series(s.points.iter().map(|&p| Circle::new(p, 4, color.filled())))
+                .map_err(|x| e(&x))?;
+        }
+    }
+    if markers || series.len() > 1 {
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .position(SeriesLabelPosition::UpperRight)
+            .draw()
+            .map_err(|x| e(&x))?;
+    }
+    root.present().map_err(|x| e(&x))?;
+    Ok(())
+}
+
+/// How a field is coloured: categories (a few small integers) or a ramp over `[lo, hi]`.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Coloring {
+    Categorical(Vec<i64>),
+    Ramp(f64, f64),
+}
+
+/// Categorical when every value is an integer and there are at most 10 distinct ones.
+pub fn coloring(values: &[f32]) -> Coloring {
+    let mut cats: Vec<i64> = Vec::new();
+    for v in values {
+        if v.fract() != 0.0 || !v.is_finite() {
+            cats.clear();
+            break;
+        }
+        let c = *v as i64;
+        if !cats.contains(&c) {
+            cats.push(c);
+            if cats.len() > 10 {
+                cats.clear();
+                break;
+            }
+        }
+    }
+    if !cats.is_empty() {
+        cats.sort();
+        return Coloring::Categorical(cats);
+    }
+    let finite = values
+        .iter()
+        .filter(|v| v.is_finite())
+        .map(|v| f64::from(*v));
+    let lo = finite.clone().fold(f64::INFINITY, f64::min);
+    let hi = finite.fold(f64::NEG_INFINITY, f64::max);
+    Coloring::Ramp(lo, hi)
+}
+
+/// Blue (0) to red (1).
+pub fn ramp(t: f64) -> RGBColor {
+    let t = if t.is_finite() {
+        t.clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    let (r, g, b) = HSLColor(0.66 * (1.0 - t), 0.85, 0.5).rgb();
+    RGBColor(r, g, b)
+}
+
+/// Particles of the last frame as dots, equal axis scales: x-y (2D) or x-z (`side_view`,
+/// 3D). Walls (`kind` 1 or 2) are grey; the others are coloured by `field`. One `<circle>`
+/// per particle.
+pub fn snapshot_plot(
+    path: &Path,
+    title: &str,
+    frame: &Frame,
+    field: &str,
+    side_view: bool,
+) -> Result<()> {
+    let err = write_err(path);
+    let e = |x: &dyn std::fmt::Display| err(x.to_string());
+    let vertical = if side_view { &frame.z } else { &frame.y };
+    let pts: Vec<(f64, f64)> = frame
+        .x
+        .iter()
+        .zip(vertical)
+        .map(|(x, y)| (f64::from(*x), f64::from(*y)))
+        .collect();
+    let ((x0, x1), (y0, y1)) = bounds(pts.iter().copied());
+    let width = 1000u32;
+    let plot_w = f64::from(width - 120);
+    let plot_h = (plot_w * (y1 - y0) / (x1 - x0)).clamp(150.0, 1400.0);
+    let height = plot_h as u32 + 110;
+    let kind = frame.fields.get("kind");
+    let is_wall = |i: usize| kind.is_some_and(|k| k[i] == 1.0 || k[i] == 2.0);
+    let values = &frame.fields[field];
+    let colored: Vec<f32> = (0..pts.len())
+        .filter(|&i| !is_wall(i) || field == "kind")
+        .map(|i| values[i])
+        .collect();
+    let coloring = coloring(&colored);
+
+    let root = SVGBackend::new(path, (width, height)).into_drawing_area();
+    root.fill(&WHITE).map_err(|x| e(&x))?;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(title, ("sans-serif", 20))
+        .margin(10)
+        .x_label_area_size(45)
+        .y_label_area_size(70)
+        .build_cartesian_2d(x0..x1, y0..y1)
+        .map_err(|x| e(&x))?;
+    chart
+        .configure_mesh()
+        .x_desc("x [m]")
+        .y_desc(if side_view { "z [m]" } else { "y [m]" })
+        .light_line_style(WHITE.mix(0.0))
+        .draw()
+        .map_err(|x| e(&x))?;
+    let color_of = |v: f32| -> RGBColor {
+        match &coloring {
+            Coloring::Categorical(cats) => {
+                let i = cats.iter().position(|c| *c as f32 == v).unwrap_or(0);
+                PALETTE[i % PALETTE.len()]
+            }
+            Coloring::Ramp(lo, hi) => ramp((f64::from(v) - lo) / (hi - lo).max(f64::MIN_POSITIVE)),
+        }
+    };
+    let radius = ((plot_w / (x1 - x0)) * 0.004).clamp(1.0, 4.0) as i32;
+    let walls: Vec<usize> = (0..pts.len())
+        .filter(|&i| is_wall(i) && field != "kind")
+        .collect();
+    if !walls.is_empty() {
+        chart
+            .draw_series(
+                walls
+                    .iter()
+                    .map(|&i| Circle::new(pts[i], radius, WALL_GREY.filled())),
+            )
+            .map_err(|x| e(&x))?
+            .label("wall")
+            .legend(|(x, y)| Rectangle::new([(x, y - 5), (x + 12, y + 5)], WALL_GREY.filled()));
+    }
+    let others: Vec<usize> = (0..pts.len())
+        .filter(|&i| !is_wall(i) || field == "kind")
+        .collect();
+    match &coloring {
+        Coloring::Categorical(cats) => {
+            for (ci, cat) in cats.iter().enumerate() {
+                let color = PALETTE[ci % PALETTE.len()];
+                let label = category_label(field, *cat);
+                chart
+                    .draw_series(
+                        others
+                            .iter()
+                            .filter(|&&i| values[i] == *cat as f32)
+                            .map(|&i| Circle::new(pts[i], radius, color.filled())),
+                    )
+                    .map_err(|x| e(&x))?
+                    .label(label)
+                    .legend(move |(x, y)| {
+                        Rectangle::new([(x, y - 5), (x + 12, y + 5)], color.filled())
+                    });
+            }
+        }
+        Coloring::Ramp(lo, hi) => {
+            chart
+                .draw_series(
+                    others
+                        .iter()
+                        .map(|&i| Circle::new(pts[i], radius, color_of(values[i]).filled())),
+                )
+                .map_err(|x| e(&x))?;
+            for (t, name) in [(0.0, "min"), (1.0, "max")] {
+                let v = lo + t * (hi - lo);
+                let color = ramp(t);
+                chart
+                    .draw_series(std::iter::empty::<Circle<(f64, f64), i32>>())
+                    .map_err(|x| e(&x))?
+                    .label(format!(
+                        "{field} {name} {v:.4} {}",
+                        super::unit_of(field).unwrap_or("")
+                    ))
+                    .legend(move |(x, y)| {
+                        Rectangle::new([(x, y - 5), (x + 12, y + 5)], color.filled())
+                    });
+            }
+        }
+    }
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .position(SeriesLabelPosition::UpperRight)
+        .draw()
+        .map_err(|x| e(&x))?;
+    root.present().map_err(|x| e(&x))?;
+    Ok(())
+}
+
+/// Legend text of category `value` of `field`.
+fn category_label(field: &str, value: i64) -> String {
+    match (field, value) {
+        ("kind", 0) => "fluid".into(),
+        ("kind", 1) => "wall".into(),
+        ("kind", 2) => "dummy".into(),
+        ("kind", 3) => "ghost".into(),
+        ("flowing", 0) => "not flowing".into(),
+        ("flowing", 1) => "flowing".into(),
+        (f, v) => format!("{f} = {v}"),
+    }
+}
