@@ -74,6 +74,9 @@ fn diagnostics(step: u32) -> Diagnostics {
         surface_particle_count: 3,
         fluid_particle_count: N as u32,
         metrics,
+        viscosity_iterations: 4 + step,
+        viscosity_relative_residual: 2e-10,
+        non_flowing_fraction: 0.25,
     }
 }
 
