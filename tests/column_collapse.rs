@@ -1,0 +1,90 @@
+//! A 2D Bingham column collapsing against a wall comes to rest as the heap of lubrication
+//! theory (DESIGN.md section 5): L = (3A/2)^(2/3) (rho g / (2 tau_y))^(1/3) and
+//! h(d) = sqrt(2 tau_y d / (rho g)) at a distance d back from the front.
+mod common;
+use mps_runner::manifest::{Fluid, Scene};
+use mps_runner::record::{Outcome, read_run};
+
+#[test]
+fn bingham_heap_matches_lubrication_closed_form() {
+    // 20 mm: the heap at rest is 6 particles thick at the wall, 200 fluid particles in all.
+    let spacing_m = 0.02;
+    let resolved = common::resolve(
+        "column_collapse_2d.yaml",
+        &[
+            "spacing_m=0.02",
+            "time.end_s=10",
+            "output.checkpoint_interval_s=2",
+        ],
+    );
+    let m = &resolved.manifest;
+    let Fluid::Bingham {
+        density_kg_m3: rho,
+        yield_stress_pa: tau,
+        ..
+    } = m.fluid
+    else {
+        panic!("column collapse is a Bingham fluid")
+    };
+    let Scene::DamBreak {
+        column_width_m,
+        column_height_m,
+        ..
+    } = m.scene
+    else {
+        panic!("column collapse uses the dam_break geometry")
+    };
+    let g = m.gravity_m_s2;
+    let area = column_width_m * column_height_m;
+    let length = (1.5 * area).powf(2.0 / 3.0) * (rho * g / (2.0 * tau)).powf(1.0 / 3.0);
+    let dir = tempfile::tempdir().unwrap();
+    let result = common::run_in(&resolved, dir.path(), 2);
+    assert_eq!(
+        result.outcome,
+        Outcome::Completed,
+        "{}",
+        result.summary.reason
+    );
+    let run = read_run(&result.path).unwrap();
+
+    let fluid_positions = |k: usize| -> Vec<(f64, f64)> {
+        let s = &run.states[k];
+        (0..s.kind.len())
+            .filter(|&i| s.kind[i] == 0)
+            .map(|i| (s.position_m[2 * i], s.position_m[2 * i + 1]))
+            .collect()
+    };
+    let front =
+        |pts: &[(f64, f64)]| pts.iter().map(|p| p.0).fold(f64::MIN, f64::max) + 0.5 * spacing_m;
+    let last = run.states.len() - 1;
+    let heap = fluid_positions(last);
+    let heap_length = front(&heap);
+    // At rest: the front moved less than 1 % of the heap length over the last 2 s.
+    let earlier = front(&fluid_positions(last - 1));
+    assert!(
+        (heap_length - earlier).abs() < 0.01 * length,
+        "still moving: {earlier} -> {heap_length}"
+    );
+
+    let error = (heap_length - length) / length;
+    eprintln!("heap length {heap_length:.4} m, closed form {length:.4} m, error {error:+.3}");
+    assert!(error.abs() < 0.10, "heap length {heap_length} vs {length}");
+    // Profile: the top of the particles within a spacing of x = L - d, against h(d). The
+    // surface is resolved to half a spacing.
+    for share in [0.25, 0.5, 0.75] {
+        let d = share * heap_length;
+        let x = heap_length - d;
+        let top = heap
+            .iter()
+            .filter(|p| (p.0 - x).abs() <= spacing_m)
+            .map(|p| p.1)
+            .fold(f64::MIN, f64::max)
+            + 0.5 * spacing_m;
+        let h = (2.0 * tau * d / (rho * g)).sqrt();
+        eprintln!("d = {d:.3} m: height {top:.4} m, closed form {h:.4} m");
+        assert!(
+            (top - h).abs() < 0.10 * h + 0.5 * spacing_m,
+            "profile at d = {d}: {top} vs {h}"
+        );
+    }
+}
