@@ -7,7 +7,7 @@ use rayon::prelude::*;
 const LIST_CHUNK: usize = 512;
 
 /// Neighbour lists in compressed rows: the neighbours of i are
-/// `indices[offsets[i]..offsets[i + 1]]`, in ascending cell order, then ascending index.
+/// `indices[offsets[i]..offsets[i + 1]]`, in ascending index order.
 #[derive(Debug, Clone, Default)]
 pub struct Neighbours {
     pub cutoff_m: f64,
@@ -182,6 +182,9 @@ impl Neighbours {
                             }
                         }
                     }
+                    // Ascending index: the order (hence every sum's rounding) then does not
+                    // depend on where the cells were when the list was built.
+                    list[before..].sort_unstable();
                     counts.push(list.len() - before);
                 }
                 (counts, list)

@@ -106,7 +106,17 @@ pub struct Solver<const D: usize> {
     /// the first step). Derived data for output, not part of the state.
     pub strain_invariant: Vec<f64>,
     neighbours: Neighbours,
+    /// Positions when the neighbour lists were built (Verlet lists with a skin).
+    listed_at_m: Vec<Vector<D>>,
+    /// Rebuild the lists at every stage (slower; for checking that reuse changes no bit).
+    pub fresh_lists: bool,
 }
+
+/// Extra reach of the neighbour lists beyond the Laplacian radius, in spacings: lists stay
+/// valid until a particle has moved half of it. Lists are in index order and operators skip
+/// pairs beyond their radius, so results do not depend on when lists were rebuilt (the same
+/// bits as fresh lists every stage).
+const LIST_SKIN: f64 = 0.3;
 
 impl<const D: usize> Solver<D> {
     pub fn new(config: SolverConfig<D>, particles: Particles<D>) -> Self {
@@ -120,6 +130,8 @@ impl<const D: usize> Solver<D> {
             step: 0,
             strain_invariant: Vec::new(),
             neighbours: Neighbours::default(),
+            listed_at_m: Vec::new(),
+            fresh_lists: false,
         }
     }
 
@@ -270,12 +282,28 @@ impl<const D: usize> Solver<D> {
     }
 
     /// Neighbour lists of the active particles at the current positions.
+    /// Makes sure the lists hold every active pair closer than the Laplacian radius: rebuilt
+    /// when some particle has moved more than half the skin since the last build.
     fn rebuild_neighbours(&mut self) {
-        let kind = &self.particles.kind;
+        let skin = LIST_SKIN * self.config.spacing_m;
+        let p = &self.particles;
+        let valid = self.listed_at_m.len() == p.len()
+            && max_by(p.len(), |i| {
+                if p.kind[i].is_active() {
+                    (p.position_m[i] - self.listed_at_m[i]).norm()
+                } else {
+                    0.0
+                }
+            }) < 0.5 * skin;
+        if valid && !self.fresh_lists {
+            return;
+        }
+        let kind = &p.kind;
         self.neighbours =
-            Neighbours::build_active(&self.particles.position_m, self.config.radius_lap_m, |i| {
+            Neighbours::build_active(&p.position_m, self.config.radius_lap_m + skin, |i| {
                 kind[i].is_active()
             });
+        self.listed_at_m = p.position_m.clone();
     }
 
     /// (5) Collision model: fluid pairs closer than the collision distance that approach each
@@ -405,6 +433,7 @@ impl<const D: usize> Solver<D> {
         let diag_extra = rho * c.compressibility_1_pa / (dt_s * dt_s);
         let assembled: Vec<(f64, f64, Vec<(u32, f64)>)> = rows
             .par_iter()
+            .with_min_len(PARTICLES_PER_TASK)
             .map(|&i| {
                 let mut diag = diag_extra;
                 let mut entries = Vec::new();
@@ -442,7 +471,9 @@ impl<const D: usize> Solver<D> {
             }
             matrix.row_offsets.push(matrix.columns.len());
         }
-        let mut solution = vec![0.0; rows.len()];
+        // Warm start from the previous pressure (part of the recorded state, so replays and
+        // resumed runs start the solver from the same guess).
+        let mut solution: Vec<f64> = rows.iter().map(|&i| p.pressure_pa[i]).collect();
         let report = solve_pcg(
             &matrix,
             &rhs,
@@ -521,6 +552,7 @@ impl<const D: usize> Solver<D> {
             }
             if (0..D).any(|a| x[a] < c.domain_min_m[a] || x[a] > c.domain_max_m[a]) {
                 p.kind[i] = ParticleKind::Ghost;
+                self.listed_at_m.clear();
                 p.velocity_m_s[i] = Vector::<D>::zeros();
                 p.pressure_pa[i] = 0.0;
             }
