@@ -308,6 +308,15 @@ fn cloud<const D: usize>(solver: &Solver<D>) -> PointCloud {
         .collect();
     let pressure: Vec<f32> = shown.iter().map(|&i| p.pressure_pa[i] as f32).collect();
     let kind: Vec<f32> = shown.iter().map(|&i| p.kind[i] as u32 as f32).collect();
+    // 1 = flowing (Pi > Pi_c at the start of the last step), 0 = non-flowing or not fluid.
+    let flowing: Vec<f32> = shown
+        .iter()
+        .map(|&i| {
+            f32::from(u8::from(
+                p.kind[i] == ParticleKind::Fluid && solver.is_flowing(i),
+            ))
+        })
+        .collect();
     point_cloud(
         time_ns(solver.time_s),
         D,
@@ -316,6 +325,7 @@ fn cloud<const D: usize>(solver: &Solver<D>) -> PointCloud {
             ("speed_m_s", &speed),
             ("pressure_pa", &pressure),
             ("kind", &kind),
+            ("flowing", &flowing),
         ],
     )
 }

@@ -43,6 +43,9 @@ pub const DIAGNOSTICS_FIELDS: &[&str] = &[
     "ppe_relative_residual",
     "surface_particle_count",
     "fluid_particle_count",
+    "viscosity_iterations",
+    "viscosity_relative_residual",
+    "non_flowing_fraction",
     "step",
 ];
 
@@ -56,6 +59,9 @@ pub fn diagnostics_value(d: &Diagnostics, name: &str) -> Option<f64> {
         "ppe_relative_residual" => d.ppe_relative_residual,
         "surface_particle_count" => d.surface_particle_count.into(),
         "fluid_particle_count" => d.fluid_particle_count.into(),
+        "viscosity_iterations" => d.viscosity_iterations.into(),
+        "viscosity_relative_residual" => d.viscosity_relative_residual,
+        "non_flowing_fraction" => d.non_flowing_fraction,
         "step" => d.step.into(),
         "time_s" => d.time_s,
         _ => return d.metrics.get(name).copied(),
