@@ -1,7 +1,7 @@
 //! Full-precision state checkpoints: canonical bytes, their SHA-256, and the conversion to and
 //! from the recorded `mps.v1.StateCheckpoint` message.
 use crate::mps::{ParticleKind, Particles, Solver, Vector};
-use crate::proto::mps::v1::StateCheckpoint;
+use crate::proto::mps::v1::{CheckpointHash, StateCheckpoint};
 use sha2::{Digest, Sha256};
 
 /// Bits of a value with -0.0 folded onto +0.0 (equal values must hash equally).
@@ -96,4 +96,14 @@ pub fn particles_from_message<const D: usize>(
         pressure_pa: msg.pressure_pa.clone(),
         kind,
     })
+}
+
+/// The summary's entry for a checkpoint.
+pub fn hash_entry(msg: &StateCheckpoint) -> CheckpointHash {
+    CheckpointHash {
+        index: msg.index,
+        step: msg.step,
+        time_s: msg.time_s,
+        state_sha256: msg.state_sha256.clone(),
+    }
 }

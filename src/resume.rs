@@ -99,12 +99,7 @@ pub fn resume(path: &Path, options: &ResumeOptions) -> Result<Resumed, ResumeErr
     }
     let checkpoints: Vec<CheckpointHash> = run.states[..last + usize::from(from_scheduled)]
         .iter()
-        .map(|s| CheckpointHash {
-            index: s.index,
-            step: s.step,
-            time_s: s.time_s,
-            state_sha256: s.state_sha256.clone(),
-        })
+        .map(checkpoint::hash_entry)
         .collect();
     for (i, s) in run.states.iter().enumerate() {
         if checkpoint::state_sha256(s) != s.state_sha256 || s.index as usize != i {
@@ -114,16 +109,7 @@ pub fn resume(path: &Path, options: &ResumeOptions) -> Result<Resumed, ResumeErr
         }
     }
 
-    let threads = options
-        .threads
-        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .map_err(|e| RunError::Threads {
-            threads,
-            message: e.to_string(),
-        })?;
+    let (pool, threads) = crate::run::thread_pool(options.threads)?;
     let job = Job {
         path,
         complete: run.complete,

@@ -66,9 +66,18 @@ pub fn run(resolved: &Resolved, options: &RunOptions) -> Result<RunResult, RunEr
         path: options.out_dir.clone(),
         source,
     })?;
-    let threads = options
-        .threads
-        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    let (pool, threads) = thread_pool(options.threads)?;
+    pool.install(|| match resolved.manifest.dimension {
+        3 => run_in::<3>(resolved, options, threads),
+        _ => run_in::<2>(resolved, options, threads),
+    })
+}
+
+/// A worker pool of `threads` threads (None = all cores), and its size. The split of the work
+/// never depends on it (DESIGN.md section 6).
+pub fn thread_pool(threads: Option<usize>) -> Result<(rayon::ThreadPool, usize), RunError> {
+    let threads =
+        threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .build()
@@ -76,10 +85,7 @@ pub fn run(resolved: &Resolved, options: &RunOptions) -> Result<RunResult, RunEr
             threads,
             message: e.to_string(),
         })?;
-    pool.install(|| match resolved.manifest.dimension {
-        3 => run_in::<3>(resolved, options, threads),
-        _ => run_in::<2>(resolved, options, threads),
-    })
+    Ok((pool, threads))
 }
 
 /// Builds the scene a manifest describes.
@@ -476,12 +482,7 @@ pub fn time_loop<const D: usize>(
         }
         if checkpoint_schedule.due(t) {
             let msg = checkpoint::to_message(checkpoints.len() as u32, solver, dt_s);
-            checkpoints.push(CheckpointHash {
-                index: msg.index,
-                step: msg.step,
-                time_s: msg.time_s,
-                state_sha256: msg.state_sha256.clone(),
-            });
+            checkpoints.push(checkpoint::hash_entry(&msg));
             sink.checkpoint(time_ns(t), &msg)?;
             last_checkpoint_step = Some(solver.step);
         }
@@ -537,12 +538,7 @@ pub fn time_loop<const D: usize>(
     let failed = matches!(outcome, Outcome::Failed(_));
     if !failed && last_checkpoint_step != Some(solver.step) {
         let msg = checkpoint::to_message(checkpoints.len() as u32, solver, dt_s);
-        checkpoints.push(CheckpointHash {
-            index: msg.index,
-            step: msg.step,
-            time_s: msg.time_s,
-            state_sha256: msg.state_sha256.clone(),
-        });
+        checkpoints.push(checkpoint::hash_entry(&msg));
         sink.checkpoint(time_ns(solver.time_s), &msg)?;
         if frames {
             sink.diagnostics(

@@ -218,12 +218,7 @@ pub fn verify(path: &Path, options: &VerifyOptions) -> Result<VerifyReport, Unus
         hashes: run
             .states
             .iter()
-            .map(|s| CheckpointHash {
-                index: s.index,
-                step: s.step,
-                time_s: s.time_s,
-                state_sha256: s.state_sha256.clone(),
-            })
+            .map(crate::checkpoint::hash_entry)
             .collect(),
         replay_wall_s: 0.0,
         replayed: false,
@@ -294,13 +289,8 @@ pub fn verify(path: &Path, options: &VerifyOptions) -> Result<VerifyReport, Unus
         }
     }
 
-    let threads = options
-        .threads
-        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .map_err(|e| unusable(format!("cannot start {threads} worker threads: {e}")))?;
+    let (pool, _) =
+        crate::run::thread_pool(options.threads).map_err(|e| unusable(e.to_string()))?;
     let started = std::time::Instant::now();
     let replay = pool.install(|| match resolved.manifest.dimension {
         3 => replay::<3>(&resolved, &run, options, to),
@@ -462,12 +452,7 @@ fn replay<const D: usize>(
                 restored: true,
                 checkpoints: run.states[..=k as usize]
                     .iter()
-                    .map(|s| CheckpointHash {
-                        index: s.index,
-                        step: s.step,
-                        time_s: s.time_s,
-                        state_sha256: s.state_sha256.clone(),
-                    })
+                    .map(crate::checkpoint::hash_entry)
                     .collect(),
                 last_checkpoint_step: Some(from.step),
             };
