@@ -500,11 +500,11 @@ pub fn time_loop<const D: usize>(
             stop_reason = format!("stop.max_steps = {} reached", m.stop.max_steps);
             break;
         }
-        if let Some(flag) = &control.interrupt {
-            if flag.load(Ordering::SeqCst) {
-                outcome = Outcome::Interrupted("interrupted by signal".to_string());
-                break;
-            }
+        if let Some(flag) = &control.interrupt
+            && flag.load(Ordering::SeqCst)
+        {
+            outcome = Outcome::Interrupted("interrupted by signal".to_string());
+            break;
         }
         if let Some(stop) = control.stop_at_step.filter(|&s| solver.step >= s) {
             outcome = Outcome::Interrupted(format!("stopped at step {stop}"));
@@ -522,14 +522,15 @@ pub fn time_loop<const D: usize>(
             }
         }
         dt_s = solver.next_dt_s(end_s);
-        if let (Some(share), Some(r)) = (m.stop.non_flowing_fraction, &report) {
-            if solver.time_s >= m.stop.non_flowing_after_s && r.non_flowing_fraction >= share {
-                stop_reason = format!(
-                    "{:.1} % of the fluid particles are non-flowing (stop.non_flowing_fraction = {share})",
-                    100.0 * r.non_flowing_fraction
-                );
-                break;
-            }
+        if let (Some(share), Some(r)) = (m.stop.non_flowing_fraction, &report)
+            && solver.time_s >= m.stop.non_flowing_after_s
+            && r.non_flowing_fraction >= share
+        {
+            stop_reason = format!(
+                "{:.1} % of the fluid particles are non-flowing (stop.non_flowing_fraction = {share})",
+                100.0 * r.non_flowing_fraction
+            );
+            break;
         }
     }
 

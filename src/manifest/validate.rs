@@ -459,18 +459,18 @@ pub fn check(m: &Manifest) -> Vec<Issue> {
         m.stop.non_flowing_after_s,
         NON_NEGATIVE,
     );
-    if let Some(share) = m.stop.non_flowing_fraction {
-        if c.real(
+    if let Some(share) = m.stop.non_flowing_fraction
+        && c.real(
             "stop.non_flowing_fraction",
             share,
             between(0.0, false, 1.0, true),
-        ) && matches!(m.fluid, Fluid::Newtonian { .. })
-        {
-            c.fail(
+        )
+        && matches!(m.fluid, Fluid::Newtonian { .. })
+    {
+        c.fail(
                 "stop.non_flowing_fraction",
                 "needs a yield-stress fluid (fluid.model bingham or bi_viscosity); a Newtonian fluid always flows".to_string(),
             );
-        }
     }
 
     c.issues

@@ -11,7 +11,31 @@ pub struct CsrMatrix {
     pub values: Vec<f64>,
 }
 
+/// One assembled row of a symmetric system: diagonal and off-diagonal (column, value) entries.
+#[derive(Debug, Clone, Default)]
+pub struct Row {
+    pub diagonal: f64,
+    pub entries: Vec<(u32, f64)>,
+}
+
 impl CsrMatrix {
+    /// Packs assembled rows, in order, into compressed rows.
+    pub fn from_rows<'a>(rows: impl IntoIterator<Item = &'a Row>) -> Self {
+        let mut m = CsrMatrix {
+            row_offsets: vec![0],
+            ..Default::default()
+        };
+        for row in rows {
+            m.diagonal.push(row.diagonal);
+            for &(c, v) in &row.entries {
+                m.columns.push(c);
+                m.values.push(v);
+            }
+            m.row_offsets.push(m.columns.len());
+        }
+        m
+    }
+
     pub fn rows(&self) -> usize {
         self.diagonal.len()
     }
@@ -92,7 +116,7 @@ pub fn solve_pcg(
         }
         a.multiply(&p, &mut ap);
         let p_ap = dot(&p, &ap);
-        if !(p_ap > 0.0) {
+        if p_ap.is_nan() || p_ap <= 0.0 {
             break; // not positive definite (or NaN): report as not converged
         }
         let alpha = rz / p_ap;

@@ -3,7 +3,7 @@ use super::grid::Neighbours;
 use super::kernel::{RefValues, weight};
 use super::operators::{gradient, number_density};
 use super::particles::{ParticleKind, Particles, Vector};
-use super::pressure::{CsrMatrix, SolveReport, solve_pcg};
+use super::pressure::{CsrMatrix, Row, SolveReport, solve_pcg};
 use super::reduce::PARTICLES_PER_TASK;
 use super::reduce::max_by;
 use super::rheology::Rheology;
@@ -431,7 +431,7 @@ impl<const D: usize> Solver<D> {
             .collect();
         let coef = 2.0 * D as f64 / (refs.lambda_m2 * refs.n0_lap);
         let diag_extra = rho * c.compressibility_1_pa / (dt_s * dt_s);
-        let assembled: Vec<(f64, f64, Vec<(u32, f64)>)> = rows
+        let assembled: Vec<Row> = rows
             .par_iter()
             .with_min_len(PARTICLES_PER_TASK)
             .map(|&i| {
@@ -455,22 +455,14 @@ impl<const D: usize> Solver<D> {
                         entries.push((unknown_of[j], -a));
                     }
                 }
-                let source = source[i];
-                (diag, source, entries)
+                Row {
+                    diagonal: diag,
+                    entries,
+                }
             })
             .collect();
-        let mut matrix = CsrMatrix::default();
-        let mut rhs = Vec::with_capacity(rows.len());
-        matrix.row_offsets.push(0);
-        for (diag, source, entries) in assembled {
-            matrix.diagonal.push(diag);
-            rhs.push(source);
-            for (col, v) in entries {
-                matrix.columns.push(col);
-                matrix.values.push(v);
-            }
-            matrix.row_offsets.push(matrix.columns.len());
-        }
+        let matrix = CsrMatrix::from_rows(&assembled);
+        let rhs: Vec<f64> = rows.iter().map(|&i| source[i]).collect();
         // Warm start from the previous pressure (part of the recorded state, so replays and
         // resumed runs start the solver from the same guess).
         let mut solution: Vec<f64> = rows.iter().map(|&i| p.pressure_pa[i]).collect();

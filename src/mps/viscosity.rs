@@ -3,7 +3,7 @@
 use super::grid::Neighbours;
 use super::kernel::{RefValues, weight};
 use super::particles::{ParticleKind, Particles, Vector};
-use super::pressure::{CsrMatrix, SolveReport, solve_pcg};
+use super::pressure::{CsrMatrix, Row, SolveReport, solve_pcg};
 use super::reduce::PARTICLES_PER_TASK;
 use super::rheology::Rheology;
 use nalgebra::SMatrix;
@@ -72,6 +72,7 @@ pub fn strain_invariant<const D: usize>(g: &SMatrix<f64, D, D>) -> f64 {
 ///   unidirectional shear (the L-flow channel, Poiseuille); the part from grad(u)^T, zero
 ///   there, is left out. Written explicitly as in the seed, the term is unstable at viscosity
 ///   ratios of 1000 (its rate 2 dLambda / (rho l0^2) far exceeds 1/dt).
+///
 /// a_ij = 2d/(lambda n0) w_ij; wall and dummy velocities are known and go to the right side.
 pub fn predict_velocity<const D: usize>(
     p: &Particles<D>,
@@ -129,7 +130,7 @@ pub fn predict_velocity<const D: usize>(
     }
     let coef = 2.0 * D as f64 / (refs.lambda_m2 * refs.n0_lap);
     // Row i: (s_i + sum_j c_ij) u_i - sum_fluid c_ij u_j = s_i rhs_i + sum_walls c_ij u_j.
-    let assembled: Vec<(f64, f64, Vector<D>, Vec<(u32, f64)>)> = rows
+    let assembled: Vec<(Row, f64, Vector<D>)> = rows
         .par_iter()
         .with_min_len(PARTICLES_PER_TASK)
         .map(|&i| {
@@ -168,26 +169,19 @@ pub fn predict_velocity<const D: usize>(
                     boundary += p.velocity_m_s[j] * c;
                 }
             }
-            (diag, scale, boundary, entries)
+            let row = Row {
+                diagonal: diag,
+                entries,
+            };
+            (row, scale, boundary)
         })
         .collect();
-    let mut matrix = CsrMatrix {
-        row_offsets: vec![0],
-        ..Default::default()
-    };
-    for (diag, _, _, entries) in &assembled {
-        matrix.diagonal.push(*diag);
-        for &(c, v) in entries {
-            matrix.columns.push(c);
-            matrix.values.push(v);
-        }
-        matrix.row_offsets.push(matrix.columns.len());
-    }
+    let matrix = CsrMatrix::from_rows(assembled.iter().map(|(row, _, _)| row));
     for axis in 0..D {
         let b: Vec<f64> = rows
             .iter()
             .zip(&assembled)
-            .map(|(&i, (_, scale, boundary, _))| rhs[i][axis] * scale + boundary[axis])
+            .map(|(&i, (_, scale, boundary))| rhs[i][axis] * scale + boundary[axis])
             .collect();
         // Start from the current velocity: close to the answer, and part of the state.
         let mut x: Vec<f64> = rows.iter().map(|&i| p.velocity_m_s[i][axis]).collect();
