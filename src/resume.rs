@@ -246,6 +246,7 @@ fn resume_in<const D: usize>(job: Job) -> Result<RunResult, ResumeError> {
         path,
         outcome: end.outcome,
         summary: end.summary,
+        stop_reason: end.stop_reason,
         wall_time_s: started.elapsed().as_secs_f64(),
     })
 }

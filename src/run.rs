@@ -32,6 +32,8 @@ pub struct RunResult {
     pub path: PathBuf,
     pub outcome: Outcome,
     pub summary: Summary,
+    /// See [`LoopEnd::stop_reason`].
+    pub stop_reason: String,
     /// Wall-clock seconds of the time loop (reported, never recorded).
     pub wall_time_s: f64,
 }
@@ -374,6 +376,7 @@ fn run_in<const D: usize>(
         path,
         outcome: end.outcome,
         summary: end.summary,
+        stop_reason: end.stop_reason,
         wall_time_s: started.elapsed().as_secs_f64(),
     })
 }
@@ -438,6 +441,10 @@ pub struct LoopControl {
 pub struct LoopEnd {
     pub outcome: Outcome,
     pub summary: Summary,
+    /// Why a completed run stopped before `time.end_s` (a stop condition), else empty. Not
+    /// recorded: the summary's reason is for failures and interrupts; a stop shows in
+    /// `stop_time_s` and the last diagnostics row.
+    pub stop_reason: String,
 }
 
 /// The time loop: from the solver's current state to the end (or a stop), sending
@@ -561,16 +568,16 @@ pub fn time_loop<const D: usize>(
     metrics.insert("steps".into(), solver.step as f64);
     metrics.insert("simulated_time_s".into(), solver.time_s);
     metrics.insert("stop_time_s".into(), solver.time_s);
-    let reason = match &outcome {
-        Outcome::Completed => stop_reason,
-        other => other.reason().to_string(),
-    };
     let summary = Summary {
         outcome: outcome.as_str().to_string(),
-        reason,
+        reason: outcome.reason().to_string(),
         metrics: metrics.into_iter().collect(),
         checkpoints,
         experiment_sha256: experiment_sha256.to_string(),
     };
-    Ok(LoopEnd { outcome, summary })
+    Ok(LoopEnd {
+        outcome,
+        summary,
+        stop_reason,
+    })
 }

@@ -367,3 +367,30 @@ fn print_hashes_lists_every_checkpoint() {
         assert!(line.ends_with(&c.state_sha256), "{line}");
     }
 }
+
+#[test]
+fn a_run_ended_by_its_stop_condition_verifies() {
+    // A Bingham run that stops as soon as most particles are non-flowing (the L-flow rule):
+    // the replay must stop at the same step and report the same summary.
+    let dir = tempfile::tempdir().unwrap();
+    let resolved = common::resolve(
+        "l_flow_2d.yaml",
+        &[
+            "spacing_m=0.025",
+            "time.end_s=0.5",
+            "stop.non_flowing_after_s=0.002",
+            "stop.non_flowing_fraction=0.5",
+            "output.checkpoint_interval_s=0.001",
+        ],
+    );
+    let result = common::run_in(&resolved, dir.path(), 2);
+    assert_eq!(result.outcome, Outcome::Completed);
+    assert!(
+        result.stop_reason.contains("non-flowing"),
+        "{}",
+        result.stop_reason
+    );
+    assert!(result.summary.metrics["stop_time_s"] < 0.5);
+    let (code, text) = verify_cli(&result.path);
+    assert_eq!(code, 0, "{text}");
+}

@@ -409,6 +409,9 @@ fn run_command(args: RunArgs) -> ExitCode {
             if !result.summary.reason.is_empty() {
                 eprintln!("reason: {}", result.summary.reason);
             }
+            if !result.stop_reason.is_empty() {
+                eprintln!("stopped: {}", result.stop_reason);
+            }
             println!("{}", result.path.display());
             outcome_code(&result.outcome)
         }
@@ -453,6 +456,9 @@ fn sweep_command(s: &sweep::Sweep, args: &RunArgs) -> ExitCode {
             );
             if !r.summary.reason.is_empty() && !args.quiet {
                 eprintln!("[{}/{total}] reason: {}", o.index + 1, r.summary.reason);
+            }
+            if !r.stop_reason.is_empty() && !args.quiet {
+                eprintln!("[{}/{total}] stopped: {}", o.index + 1, r.stop_reason);
             }
         }
         Err(e) => println!("[{}/{total}] {} error {e}", o.index + 1, o.label),
