@@ -41,6 +41,37 @@ pub struct SolverConfig<const D: usize> {
     /// Fluid particles must stay inside this box.
     pub domain_min_m: Vector<D>,
     pub domain_max_m: Vector<D>,
+    /// A wall that moves (the slump cone), if any.
+    pub moving_wall: Option<MovingWall>,
+}
+
+/// Wall and dummy particles `first..end` that rise along the last axis (the slump cone):
+/// from `start_s` on at `speed_m_s` until they have risen `travel_m`, then they stay. Their
+/// height is a pure function of the simulated time, so a checkpoint (which holds positions
+/// and time) is all a resumed run needs. While rising their velocity is the lift velocity, so
+/// the implicit viscous stage sees a moving no-slip wall.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MovingWall {
+    pub first: usize,
+    pub end: usize,
+    pub start_s: f64,
+    pub speed_m_s: f64,
+    pub travel_m: f64,
+}
+
+impl MovingWall {
+    /// How far the wall has risen at time `t_s` (0 before `start_s`, at most `travel_m`).
+    pub fn offset_m(&self, t_s: f64) -> f64 {
+        ((t_s - self.start_s) * self.speed_m_s).clamp(0.0, self.travel_m)
+    }
+    /// Its upward speed during the step that starts at `t_s`.
+    pub fn speed_at_m_s(&self, t_s: f64) -> f64 {
+        if t_s >= self.start_s && self.offset_m(t_s) < self.travel_m {
+            self.speed_m_s
+        } else {
+            0.0
+        }
+    }
 }
 
 /// Source term of the pressure Poisson equation.
@@ -185,6 +216,13 @@ impl<const D: usize> Solver<D> {
     pub fn step(&mut self, dt_s: f64) -> Result<StepReport, StepError> {
         // (1) Viscosity (implicit, with the effective viscosity of the rheology) and gravity
         // give the predicted velocity u*, then (2) r* = r + dt u*.
+        if let Some(w) = &self.config.moving_wall {
+            let speed = w.speed_at_m_s(self.time_s);
+            for v in &mut self.particles.velocity_m_s[w.first..w.end] {
+                *v = Vector::<D>::zeros();
+                v[D - 1] = speed;
+            }
+        }
         self.rebuild_neighbours();
         let start_density = match self.config.source_term {
             SourceTerm::Mixed => Some(self.number_density()),
@@ -213,6 +251,12 @@ impl<const D: usize> Solver<D> {
                 if p.kind[i] == ParticleKind::Fluid {
                     p.velocity_m_s[i] = stage.velocity_m_s[i];
                     p.position_m[i] += p.velocity_m_s[i] * dt_s;
+                }
+            }
+            if let Some(w) = &self.config.moving_wall {
+                let rise = w.offset_m(self.time_s + dt_s) - w.offset_m(self.time_s);
+                for x in &mut p.position_m[w.first..w.end] {
+                    x[D - 1] += rise;
                 }
             }
         }
