@@ -31,6 +31,9 @@ pub struct SolverConfig<const D: usize> {
     pub source_term: SourceTerm,
     pub compressibility_1_pa: f64,
     pub collision_distance_m: f64,
+    /// Collision distance between a fluid and a wall particle (see
+    /// [`wall_collision_distance_m`]).
+    pub wall_collision_distance_m: f64,
     pub collision_restitution: f64,
     pub ppe_tolerance: f64,
     pub ppe_max_iterations: u32,
@@ -82,6 +85,23 @@ pub enum SourceTerm {
     /// -(rho/dt) div(u*)_i + gamma rho/dt^2 (n^k_i - n0)/n0 with n^k at the start of the step
     /// (Tanaka & Masunaga 2010): much less pressure noise.
     Mixed,
+}
+
+/// The fluid-wall collision distance for a fluid-fluid one of `collision_distance_m`.
+/// In 2D a wall's gaps between neighbouring wall particles are l0 wide, so a fluid particle
+/// cannot pass closer than l0/2 to them and the collision distance (0.5 l0 by default) closes
+/// them. In 3D the gap at the centre of a square of wall particles leaves half a face
+/// diagonal, 0.707 l0: a fluid particle without pressure (free surface, as in a thin spreading
+/// layer) falls through the wall and its dummy layers under gravity. So in 3D fluid-wall
+/// pairs collide below max(collision distance, 0.8 l0), which stops a particle over such a gap
+/// 0.37 l0 above the wall layer's centres and leaves a particle resting on the wall (l0 above
+/// it) untouched. 2D is unchanged.
+pub fn wall_collision_distance_m(dimension: usize, collision_distance_m: f64, spacing_m: f64) -> f64 {
+    if dimension == 3 {
+        collision_distance_m.max(0.8 * spacing_m)
+    } else {
+        collision_distance_m
+    }
 }
 
 /// Why a step could not be completed.
@@ -361,6 +381,7 @@ impl<const D: usize> Solver<D> {
         let p = &self.particles;
         let nb = &self.neighbours;
         let d2 = c.collision_distance_m * c.collision_distance_m;
+        let d2_wall = c.wall_collision_distance_m * c.wall_collision_distance_m;
         let e = c.collision_restitution;
         let dv: Vec<Vector<D>> = (0..p.len())
             .into_par_iter()
@@ -377,13 +398,14 @@ impl<const D: usize> Solver<D> {
                     }
                     let r = nb.displacement(&p.position_m, i, j);
                     let r2 = r.norm_squared();
-                    if r2 >= d2 || r2 == 0.0 {
+                    let fluid_pair = p.kind[j] == ParticleKind::Fluid;
+                    if r2 >= (if fluid_pair { d2 } else { d2_wall }) || r2 == 0.0 {
                         continue;
                     }
                     let n = r / r2.sqrt();
                     let approach = (p.velocity_m_s[i] - p.velocity_m_s[j]).dot(&n);
                     if approach > 0.0 {
-                        let share = if p.kind[j] == ParticleKind::Fluid {
+                        let share = if fluid_pair {
                             0.5
                         } else {
                             1.0
