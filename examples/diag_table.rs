@@ -52,6 +52,12 @@ pub fn where_are(run: &mps_runner::record::RunFile) {
                 }
             }
             line += &format!("  kind{kind}: n={n} z=[{zmin:.3},{zmax:.3}] rmax={rmax:.3}");
+            if kind == 0 {
+                let high = (0..s.kind.len())
+                    .filter(|&i| s.kind[i] == 0 && s.position_m[i * d + d - 1] > 0.1)
+                    .count();
+                line += &format!(" above0.1m={high}");
+            }
         }
         println!("{line}");
     }

@@ -304,7 +304,12 @@ fn slump_metrics<const D: usize>(
 ) {
     use scene::slump;
     let l0 = m.spacing_m;
-    let radii = slump::spread_radii_m(particles, l0);
+    let Some(spec) = slump_spec(&m.scene) else {
+        return;
+    };
+    // Fluid lifted above the cone's height (stuck to its wall) is not part of the pancake.
+    let z_max = spec.cone_height_m;
+    let radii = slump::spread_radii_m(particles, l0, z_max);
     let mean = radii.iter().sum::<f64>() / radii.len() as f64;
     let min = radii.iter().copied().fold(f64::INFINITY, f64::min);
     let max = radii.iter().copied().fold(0.0, f64::max);
@@ -314,12 +319,16 @@ fn slump_metrics<const D: usize>(
     out.insert("spread_diameter_m".into(), 2.0 * mean);
     out.insert(
         "centre_height_m".into(),
-        slump::surface_height_m(particles, l0, 0.0, 1.5 * l0),
+        slump::surface_height_m(particles, l0, 0.0, 1.5 * l0, z_max),
     );
     let tau = yield_stress_pa(&m.fluid);
     if tau > 0.0 {
         let (rho, g) = (m.fluid.density_kg_m3(), m.gravity_m_s2);
-        let volume = particles.fluid_count() as f64 * l0.powi(D as i32);
+        let on_plate = (0..particles.len())
+            .filter(|&i| slump::on_plate(particles, i, z_max))
+            .count();
+        out.insert("fluid_on_plate_count".into(), on_plate as f64);
+        let volume = on_plate as f64 * l0.powi(D as i32);
         let radius = slump::closed_form_radius_m(rho, g, volume, tau);
         out.insert("closed_form_radius_m".into(), radius);
         // The surface at rest at a quarter, half and three quarters of the measured mean
@@ -328,7 +337,7 @@ fn slump_metrics<const D: usize>(
             let r = share * mean;
             out.insert(
                 format!("surface_height_{name}_m"),
-                slump::surface_height_m(particles, l0, r, l0),
+                slump::surface_height_m(particles, l0, r, l0, z_max),
             );
             out.insert(
                 format!("closed_form_height_{name}_m"),

@@ -174,12 +174,14 @@ fn one_and_two_threads_give_identical_bits_in_3d() {
 }
 
 /// Coarse physics check (l0 = 25 mm, 360 particles; the cone removed at once, dt_max = 2 ms,
-/// 3 s: about 20 s of test time). At this spacing the closed-form pancake is 1.5 particles
-/// thick at its centre, so the resolution is the particle: the spread radius (the furthest
-/// particle's centre + l0/2, mean over the octants) must match R = 0.303 m within one
-/// spacing, and the surface height at R/4, R/2 and 3R/4 (the highest centre + l0/2) the
+/// 8 s, 4000 steps: about 25 s of CPU). At this spacing the closed-form pancake is 1.5
+/// particles thick at its centre, so the resolution is the particle: the spread radius (the
+/// furthest particle's centre + l0/2, mean over the octants) must match R = 0.303 m within
+/// one spacing, and the surface height at R/4, R/2 and 3R/4 (the highest centre + l0/2) the
 /// closed-form h(r) = sqrt(2 tau_0 (R - r)/(rho g)) within half a spacing. Measured (this
-/// build): R = 0.2985 m (-1.4 %), heights 0.042/0.036/0.028 m against 0.032/0.026/0.018 m.
+/// build): a plateau at R = 0.298 m (-1.5 %) from 2.5 to 3.5 s with a two-particle centre,
+/// which then collapses into a single layer (4.5 to 7 s); at 8 s R = 0.3228 m (+6.6 %,
+/// 0.8 l0), heights 0.028/0.026/0.021 m against 0.033/0.027/0.019 m.
 #[test]
 fn coarse_spread_matches_the_closed_form() {
     let l0 = 0.025;
@@ -189,7 +191,7 @@ fn coarse_spread_matches_the_closed_form() {
             "spacing_m=0.025",
             "scene.lift_speed_m_s=0",
             "time.dt_max_s=0.002",
-            "time.end_s=3",
+            "time.end_s=8",
             "output.diagnostics_interval_s=0.1",
             "output.checkpoint_interval_s=1",
             "stop.non_flowing_fraction=null",
@@ -223,14 +225,16 @@ fn coarse_spread_matches_the_closed_form() {
             .unwrap()
             .clone()
     };
-    let drift = at(3.0).metrics["spread_radius_mean_m"] - at(2.5).metrics["spread_radius_mean_m"];
+    let end = run.diagnostics.last().unwrap();
+    let drift = end.metrics["spread_radius_mean_m"] - at(7.5).metrics["spread_radius_mean_m"];
     assert!(drift.abs() < 0.1 * l0, "still spreading: {drift} m in 0.5 s");
     let peak = run
         .diagnostics
         .iter()
         .map(|d| d.kinetic_energy_j)
         .fold(0.0, f64::max);
-    assert!(at(3.0).kinetic_energy_j < 1e-3 * peak, "{} J", at(3.0).kinetic_energy_j);
+    let last = end.kinetic_energy_j;
+    assert!(last < 1e-3 * peak, "{last} J of {peak} J");
     eprintln!(
         "spread radius {radius:.4} m (closed form {closed:.4} m), centre height {:.4} m",
         s["centre_height_m"]

@@ -283,7 +283,7 @@ impl<const D: usize> Solver<D> {
 
         // Neighbours at the predicted positions, used by every later stage of the step.
         self.rebuild_neighbours();
-        self.collide(dt_s);
+        self.collide(dt_s, false);
 
         // (3) Number density n*, free surface, pressure Poisson equation.
         let number_density = self.number_density();
@@ -305,6 +305,11 @@ impl<const D: usize> Solver<D> {
 
         // (4) Correct velocity and position with the pressure gradient.
         self.correct_with_pressure_gradient(dt_s);
+        if D == 3 {
+            // The correction can push a free-surface particle into a gap of the wall lattice
+            // (see `wall_collision_distance_m`): fluid-wall pairs collide once more.
+            self.collide(dt_s, true);
+        }
 
         self.time_s += dt_s;
         self.step += 1;
@@ -373,7 +378,8 @@ impl<const D: usize> Solver<D> {
     /// (5) Collision model: fluid pairs closer than the collision distance that approach each
     /// other exchange momentum along their line of centres with restitution e (equal masses;
     /// walls are immovable). Jacobi-style: all impulses from the pre-collision velocities.
-    fn collide(&mut self, dt_s: f64) {
+    /// `walls_only`: fluid-wall pairs only.
+    fn collide(&mut self, dt_s: f64, walls_only: bool) {
         let c = &self.config;
         if c.collision_distance_m <= 0.0 {
             return;
@@ -399,6 +405,9 @@ impl<const D: usize> Solver<D> {
                     let r = nb.displacement(&p.position_m, i, j);
                     let r2 = r.norm_squared();
                     let fluid_pair = p.kind[j] == ParticleKind::Fluid;
+                    if fluid_pair && walls_only {
+                        continue;
+                    }
                     if r2 >= (if fluid_pair { d2 } else { d2_wall }) || r2 == 0.0 {
                         continue;
                     }

@@ -129,12 +129,22 @@ fn sector(x: f64, y: f64) -> usize {
     usize::from(x < 0.0) * 4 + usize::from(y < 0.0) * 2 + usize::from(x.abs() < y.abs())
 }
 
+/// Whether fluid particle i counts as the concrete on the plate: at most `z_max_m` high
+/// (the cone height: a few particles stick to the cone's wall and are lifted with it).
+pub fn on_plate<const D: usize>(particles: &Particles<D>, i: usize, z_max_m: f64) -> bool {
+    particles.kind[i] == ParticleKind::Fluid && particles.position_m[i][D - 1] <= z_max_m
+}
+
 /// Spread radius per sector: the horizontal distance from the axis of the furthest fluid
-/// particle in that sector plus l0/2 (its far edge), 0 for an empty sector.
-pub fn spread_radii_m<const D: usize>(particles: &Particles<D>, spacing_m: f64) -> [f64; SECTORS] {
+/// particle on the plate in that sector plus l0/2 (its far edge), 0 for an empty sector.
+pub fn spread_radii_m<const D: usize>(
+    particles: &Particles<D>,
+    spacing_m: f64,
+    z_max_m: f64,
+) -> [f64; SECTORS] {
     let mut r2_max = [f64::NEG_INFINITY; SECTORS];
     for i in 0..particles.len() {
-        if particles.kind[i] != ParticleKind::Fluid {
+        if !on_plate(particles, i, z_max_m) {
             continue;
         }
         let x = particles.position_m[i];
@@ -151,16 +161,18 @@ pub fn spread_radii_m<const D: usize>(particles: &Particles<D>, spacing_m: f64) 
 }
 
 /// Height of the fluid surface at horizontal distance `r_m` from the axis: the highest fluid
-/// particle whose distance lies within `band_m` of `r_m`, plus l0/2 (0 when there is none).
+/// particle on the plate whose distance lies within `band_m` of `r_m`, plus l0/2 (0 when there
+/// is none).
 pub fn surface_height_m<const D: usize>(
     particles: &Particles<D>,
     spacing_m: f64,
     r_m: f64,
     band_m: f64,
+    z_max_m: f64,
 ) -> f64 {
     let mut top = f64::NEG_INFINITY;
     for i in 0..particles.len() {
-        if particles.kind[i] != ParticleKind::Fluid {
+        if !on_plate(particles, i, z_max_m) {
             continue;
         }
         let x = particles.position_m[i];
