@@ -7,7 +7,10 @@ fn main() {
     let run = read_run(std::path::Path::new(&path)).expect("readable run");
     if let Some(first) = run.diagnostics.first() {
         let names: Vec<&String> = first.metrics.keys().collect();
-        print!("{:>8} {:>6} {:>11} {:>6} {:>5} {:>5}", "t_s", "step", "kinetic_j", "nonfl", "ppe", "visc");
+        print!(
+            "{:>8} {:>6} {:>11} {:>6} {:>5} {:>5}",
+            "t_s", "step", "kinetic_j", "nonfl", "ppe", "visc"
+        );
         for n in &names {
             print!(" {:>12}", n.trim_end_matches("_m"));
         }
@@ -15,7 +18,12 @@ fn main() {
         for d in &run.diagnostics {
             print!(
                 "{:>8.3} {:>6} {:>11.4e} {:>6.3} {:>5} {:>5}",
-                d.time_s, d.step, d.kinetic_energy_j, d.non_flowing_fraction, d.ppe_iterations, d.viscosity_iterations
+                d.time_s,
+                d.step,
+                d.kinetic_energy_j,
+                d.non_flowing_fraction,
+                d.ppe_iterations,
+                d.viscosity_iterations
             );
             for n in &names {
                 print!(" {:>12.4}", d.metrics.get(*n).copied().unwrap_or(f64::NAN));

@@ -4,9 +4,7 @@
 //! schedule, diagnostics, checkpoints, stop conditions, outcome).
 use crate::checkpoint;
 use crate::manifest::{Fluid, Manifest, PpeSource, Resolved, Scene as SceneSpec};
-use crate::mps::{
-    MovingWall, ParticleKind, Particles, Rheology, Solver, SolverConfig, SourceTerm,
-};
+use crate::mps::{MovingWall, ParticleKind, Particles, Rheology, Solver, SolverConfig, SourceTerm};
 use crate::proto::foxglove::PointCloud;
 use crate::proto::mps::v1::{CheckpointHash, Diagnostics, StateCheckpoint, Summary};
 use crate::record::{Outcome, RecordError, Recorder, RunHeader, point_cloud};

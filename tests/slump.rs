@@ -87,7 +87,11 @@ fn scene_geometry() {
         );
     }
     // Removed at once: no cone.
-    let m = common::resolve("slump_3d.yaml", &["spacing_m=0.025", "scene.lift_speed_m_s=0"]).manifest;
+    let m = common::resolve(
+        "slump_3d.yaml",
+        &["spacing_m=0.025", "scene.lift_speed_m_s=0"],
+    )
+    .manifest;
     assert!(build_scene::<3>(&m).moving.is_none());
 }
 
@@ -110,7 +114,12 @@ fn cone_lifts_at_its_speed_and_holds_the_fluid_before() {
     let cone = start.moving.clone().unwrap();
     let dir = tempfile::tempdir().unwrap();
     let result = common::run_in(&resolved, dir.path(), 2);
-    assert_eq!(result.outcome, Outcome::Completed, "{}", result.summary.reason);
+    assert_eq!(
+        result.outcome,
+        Outcome::Completed,
+        "{}",
+        result.summary.reason
+    );
     let run = read_run(&result.path).unwrap();
     assert_eq!(run.states.len(), 5);
     for s in &run.states {
@@ -118,7 +127,11 @@ fn cone_lifts_at_its_speed_and_holds_the_fluid_before() {
         for i in cone.clone() {
             let z = s.position_m[3 * i + 2];
             let z0 = start.particles.position_m[i][2];
-            assert!((z - z0 - rise).abs() < 1e-9, "t = {}: {z} vs {z0} + {rise}", s.time_s);
+            assert!(
+                (z - z0 - rise).abs() < 1e-9,
+                "t = {}: {z} vs {z0} + {rise}",
+                s.time_s
+            );
         }
         if s.time_s <= 0.1 {
             // Still in the cone (within the collision reach of its wall).
@@ -199,13 +212,21 @@ fn coarse_spread_matches_the_closed_form() {
     );
     let dir = tempfile::tempdir().unwrap();
     let result = common::run_in(&resolved, dir.path(), 2);
-    assert_eq!(result.outcome, Outcome::Completed, "{}", result.summary.reason);
+    assert_eq!(
+        result.outcome,
+        Outcome::Completed,
+        "{}",
+        result.summary.reason
+    );
     let s = &result.summary.metrics;
     let closed = s["closed_form_radius_m"];
     assert!((closed - 0.3027).abs() < 5e-4, "{closed}");
     assert_eq!(s["ghost_particle_count"], 0.0);
     let radius = s["spread_radius_mean_m"];
-    assert!((radius - closed).abs() < l0, "spread radius {radius} vs {closed}");
+    assert!(
+        (radius - closed).abs() < l0,
+        "spread radius {radius} vs {closed}"
+    );
     assert!((s["spread_diameter_m"] - 2.0 * radius).abs() < 1e-12);
     assert!(s["spread_radius_min_m"] <= radius && radius <= s["spread_radius_max_m"]);
     for r in ["r25", "r50", "r75"] {
@@ -227,7 +248,10 @@ fn coarse_spread_matches_the_closed_form() {
     };
     let end = run.diagnostics.last().unwrap();
     let drift = end.metrics["spread_radius_mean_m"] - at(7.5).metrics["spread_radius_mean_m"];
-    assert!(drift.abs() < 0.1 * l0, "still spreading: {drift} m in 0.5 s");
+    assert!(
+        drift.abs() < 0.1 * l0,
+        "still spreading: {drift} m in 0.5 s"
+    );
     let peak = run
         .diagnostics
         .iter()

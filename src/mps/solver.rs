@@ -96,7 +96,11 @@ pub enum SourceTerm {
 /// pairs collide below max(collision distance, 0.8 l0), which stops a particle over such a gap
 /// 0.37 l0 above the wall layer's centres and leaves a particle resting on the wall (l0 above
 /// it) untouched. 2D is unchanged.
-pub fn wall_collision_distance_m(dimension: usize, collision_distance_m: f64, spacing_m: f64) -> f64 {
+pub fn wall_collision_distance_m(
+    dimension: usize,
+    collision_distance_m: f64,
+    spacing_m: f64,
+) -> f64 {
     if dimension == 3 {
         collision_distance_m.max(0.8 * spacing_m)
     } else {
@@ -414,11 +418,7 @@ impl<const D: usize> Solver<D> {
                     let n = r / r2.sqrt();
                     let approach = (p.velocity_m_s[i] - p.velocity_m_s[j]).dot(&n);
                     if approach > 0.0 {
-                        let share = if fluid_pair {
-                            0.5
-                        } else {
-                            1.0
-                        };
+                        let share = if fluid_pair { 0.5 } else { 1.0 };
                         dv -= n * ((1.0 + e) * share * approach);
                     }
                 }

@@ -74,7 +74,8 @@ pub fn build<const D: usize>(
     });
 
     // Plate: wall layers right under z = 0, then dummies.
-    let plate_lo: [i64; D] = std::array::from_fn(|a| if a == D - 1 { -layers } else { -half_plate });
+    let plate_lo: [i64; D] =
+        std::array::from_fn(|a| if a == D - 1 { -layers } else { -half_plate });
     let plate_hi: [i64; D] = std::array::from_fn(|a| if a == D - 1 { 0 } else { half_plate });
     for_each_index(plate_lo, plate_hi, |idx| {
         let kind = if idx[D - 1] >= -i64::from(wall_layers) {
@@ -190,7 +191,12 @@ pub fn surface_height_m<const D: usize>(
 
 /// Roussel & Coussot (2005), thin "pancake" regime: final radius of a yield-stress fluid of
 /// volume V spread on a plane, R = (225 rho g V^2 / (128 pi^2 tau_0))^(1/5).
-pub fn closed_form_radius_m(density_kg_m3: f64, gravity_m_s2: f64, volume_m3: f64, yield_stress_pa: f64) -> f64 {
+pub fn closed_form_radius_m(
+    density_kg_m3: f64,
+    gravity_m_s2: f64,
+    volume_m3: f64,
+    yield_stress_pa: f64,
+) -> f64 {
     let pi2 = std::f64::consts::PI * std::f64::consts::PI;
     (225.0 * density_kg_m3 * gravity_m_s2 * volume_m3 * volume_m3 / (128.0 * pi2 * yield_stress_pa))
         .powf(0.2)
