@@ -308,6 +308,52 @@ pub enum Scene {
         #[serde(default = "default_lf_depth_m")]
         depth_m: f64,
     },
+    /// Slump-flow test, 3D only (seed 004; EN 12350-8): a frustum cone (open at both ends)
+    /// standing on a square no-slip plate, filled with concrete and lifted. The plate's top is
+    /// z = 0, the cone's axis x = y = 0.
+    Slump {
+        /// Inner height of the cone, in metres.
+        #[serde(default = "default_sl_cone_height_m")]
+        cone_height_m: f64,
+        /// Inner diameter at the bottom (on the plate), in metres.
+        #[serde(default = "default_sl_cone_bottom_diameter_m")]
+        cone_bottom_diameter_m: f64,
+        /// Inner diameter at the top, in metres.
+        #[serde(default = "default_sl_cone_top_diameter_m")]
+        cone_top_diameter_m: f64,
+        /// Side of the square plate, in metres.
+        #[serde(default = "default_sl_plate_size_m")]
+        plate_size_m: f64,
+        /// Lift speed of the cone, m/s; 0 = no cone (removed at once at t = 0).
+        #[serde(default = "default_sl_lift_speed_m_s")]
+        lift_speed_m_s: f64,
+        /// Simulated time at which the lift starts, in seconds (the concrete rests in the
+        /// cone before).
+        #[serde(default)]
+        lift_start_s: f64,
+        /// How far the cone is lifted, in metres; it then stays there, clear of the concrete.
+        #[serde(default = "default_sl_lift_height_m")]
+        lift_height_m: f64,
+    },
+}
+
+fn default_sl_cone_height_m() -> f64 {
+    0.3
+}
+fn default_sl_cone_bottom_diameter_m() -> f64 {
+    0.2
+}
+fn default_sl_cone_top_diameter_m() -> f64 {
+    0.1
+}
+fn default_sl_plate_size_m() -> f64 {
+    0.9
+}
+fn default_sl_lift_speed_m_s() -> f64 {
+    0.2
+}
+fn default_sl_lift_height_m() -> f64 {
+    0.4
 }
 
 fn default_lf_vertical_width_m() -> f64 {
@@ -335,6 +381,7 @@ impl Scene {
         match self {
             Scene::DamBreak { .. } => "dam_break",
             Scene::LFlow { .. } => "l_flow",
+            Scene::Slump { .. } => "slump",
         }
     }
 }
@@ -470,6 +517,15 @@ pub(crate) fn samples() -> Vec<Manifest> {
             channel_height_m: default_lf_channel_height_m(),
             fill_height_m: default_lf_fill_height_m(),
             depth_m: default_lf_depth_m(),
+        },
+        Scene::Slump {
+            cone_height_m: default_sl_cone_height_m(),
+            cone_bottom_diameter_m: default_sl_cone_bottom_diameter_m(),
+            cone_top_diameter_m: default_sl_cone_top_diameter_m(),
+            plate_size_m: default_sl_plate_size_m(),
+            lift_speed_m_s: default_sl_lift_speed_m_s(),
+            lift_start_s: 0.0,
+            lift_height_m: default_sl_lift_height_m(),
         },
     ];
     let n = fluids.len().max(scenes.len());

@@ -319,7 +319,7 @@ pub fn check(m: &Manifest) -> Vec<Issue> {
     // scene
     match &m.scene {
         // Checked below.
-        Scene::LFlow { .. } => {}
+        Scene::LFlow { .. } | Scene::Slump { .. } => {}
         Scene::DamBreak {
             tank_width_m,
             tank_height_m,
@@ -375,6 +375,67 @@ pub fn check(m: &Manifest) -> Vec<Issue> {
                                 ),
                             );
                         }
+                    }
+                }
+            }
+        }
+    }
+
+    if let Scene::Slump {
+        cone_height_m,
+        cone_bottom_diameter_m,
+        cone_top_diameter_m,
+        plate_size_m,
+        lift_speed_m_s,
+        lift_start_s,
+        lift_height_m,
+    } = &m.scene
+    {
+        if m.dimension != 3 {
+            c.fail(
+                "dimension",
+                format!(
+                    "scene.kind slump is a 3D test (an axisymmetric cone): dimension must be 3, got {}",
+                    m.dimension
+                ),
+            );
+        }
+        let dims = [
+            ("scene.cone_height_m", *cone_height_m),
+            ("scene.cone_bottom_diameter_m", *cone_bottom_diameter_m),
+            ("scene.cone_top_diameter_m", *cone_top_diameter_m),
+            ("scene.plate_size_m", *plate_size_m),
+        ];
+        let mut all_ok = true;
+        for (field, x) in dims {
+            all_ok &= c.real(field, x, POSITIVE);
+        }
+        c.real("scene.lift_speed_m_s", *lift_speed_m_s, NON_NEGATIVE);
+        c.real("scene.lift_start_s", *lift_start_s, NON_NEGATIVE);
+        c.real("scene.lift_height_m", *lift_height_m, POSITIVE);
+        if all_ok {
+            let widest = cone_bottom_diameter_m.max(*cone_top_diameter_m);
+            if *plate_size_m <= widest {
+                c.fail(
+                    "scene.plate_size_m",
+                    format!(
+                        "must be > the cone's widest diameter ({}), got {}",
+                        fmt_num(widest),
+                        fmt_num(*plate_size_m)
+                    ),
+                );
+            }
+            if spacing_ok {
+                for (field, x) in dims {
+                    if x < 2.0 * m.spacing_m {
+                        c.fail(
+                            field,
+                            format!(
+                                "must be >= 2 * spacing_m = {}, got {}",
+                                fmt_num(2.0 * m.spacing_m),
+                                fmt_num(x)
+                            ),
+                        );
                     }
                 }
             }

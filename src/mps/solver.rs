@@ -31,6 +31,9 @@ pub struct SolverConfig<const D: usize> {
     pub source_term: SourceTerm,
     pub compressibility_1_pa: f64,
     pub collision_distance_m: f64,
+    /// Collision distance between a fluid and a wall particle (see
+    /// [`wall_collision_distance_m`]).
+    pub wall_collision_distance_m: f64,
     pub collision_restitution: f64,
     pub ppe_tolerance: f64,
     pub ppe_max_iterations: u32,
@@ -41,6 +44,37 @@ pub struct SolverConfig<const D: usize> {
     /// Fluid particles must stay inside this box.
     pub domain_min_m: Vector<D>,
     pub domain_max_m: Vector<D>,
+    /// A wall that moves (the slump cone), if any.
+    pub moving_wall: Option<MovingWall>,
+}
+
+/// Wall and dummy particles `first..end` that rise along the last axis (the slump cone):
+/// from `start_s` on at `speed_m_s` until they have risen `travel_m`, then they stay. Their
+/// height is a pure function of the simulated time, so a checkpoint (which holds positions
+/// and time) is all a resumed run needs. While rising their velocity is the lift velocity, so
+/// the implicit viscous stage sees a moving no-slip wall.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MovingWall {
+    pub first: usize,
+    pub end: usize,
+    pub start_s: f64,
+    pub speed_m_s: f64,
+    pub travel_m: f64,
+}
+
+impl MovingWall {
+    /// How far the wall has risen at time `t_s` (0 before `start_s`, at most `travel_m`).
+    pub fn offset_m(&self, t_s: f64) -> f64 {
+        ((t_s - self.start_s) * self.speed_m_s).clamp(0.0, self.travel_m)
+    }
+    /// Its upward speed during the step that starts at `t_s`.
+    pub fn speed_at_m_s(&self, t_s: f64) -> f64 {
+        if t_s >= self.start_s && self.offset_m(t_s) < self.travel_m {
+            self.speed_m_s
+        } else {
+            0.0
+        }
+    }
 }
 
 /// Source term of the pressure Poisson equation.
@@ -51,6 +85,27 @@ pub enum SourceTerm {
     /// -(rho/dt) div(u*)_i + gamma rho/dt^2 (n^k_i - n0)/n0 with n^k at the start of the step
     /// (Tanaka & Masunaga 2010): much less pressure noise.
     Mixed,
+}
+
+/// The fluid-wall collision distance for a fluid-fluid one of `collision_distance_m`.
+/// In 2D a wall's gaps between neighbouring wall particles are l0 wide, so a fluid particle
+/// cannot pass closer than l0/2 to them and the collision distance (0.5 l0 by default) closes
+/// them. In 3D the gap at the centre of a square of wall particles leaves half a face
+/// diagonal, 0.707 l0: a fluid particle without pressure (free surface, as in a thin spreading
+/// layer) falls through the wall and its dummy layers under gravity. So in 3D fluid-wall
+/// pairs collide below max(collision distance, 0.8 l0), which stops a particle over such a gap
+/// 0.37 l0 above the wall layer's centres and leaves a particle resting on the wall (l0 above
+/// it) untouched. 2D is unchanged.
+pub fn wall_collision_distance_m(
+    dimension: usize,
+    collision_distance_m: f64,
+    spacing_m: f64,
+) -> f64 {
+    if dimension == 3 {
+        collision_distance_m.max(0.8 * spacing_m)
+    } else {
+        collision_distance_m
+    }
 }
 
 /// Why a step could not be completed.
@@ -185,6 +240,13 @@ impl<const D: usize> Solver<D> {
     pub fn step(&mut self, dt_s: f64) -> Result<StepReport, StepError> {
         // (1) Viscosity (implicit, with the effective viscosity of the rheology) and gravity
         // give the predicted velocity u*, then (2) r* = r + dt u*.
+        if let Some(w) = &self.config.moving_wall {
+            let speed = w.speed_at_m_s(self.time_s);
+            for v in &mut self.particles.velocity_m_s[w.first..w.end] {
+                *v = Vector::<D>::zeros();
+                v[D - 1] = speed;
+            }
+        }
         self.rebuild_neighbours();
         let start_density = match self.config.source_term {
             SourceTerm::Mixed => Some(self.number_density()),
@@ -215,11 +277,17 @@ impl<const D: usize> Solver<D> {
                     p.position_m[i] += p.velocity_m_s[i] * dt_s;
                 }
             }
+            if let Some(w) = &self.config.moving_wall {
+                let rise = w.offset_m(self.time_s + dt_s) - w.offset_m(self.time_s);
+                for x in &mut p.position_m[w.first..w.end] {
+                    x[D - 1] += rise;
+                }
+            }
         }
 
         // Neighbours at the predicted positions, used by every later stage of the step.
         self.rebuild_neighbours();
-        self.collide(dt_s);
+        self.collide(dt_s, false);
 
         // (3) Number density n*, free surface, pressure Poisson equation.
         let number_density = self.number_density();
@@ -241,6 +309,11 @@ impl<const D: usize> Solver<D> {
 
         // (4) Correct velocity and position with the pressure gradient.
         self.correct_with_pressure_gradient(dt_s);
+        if D == 3 {
+            // The correction can push a free-surface particle into a gap of the wall lattice
+            // (see `wall_collision_distance_m`): fluid-wall pairs collide once more.
+            self.collide(dt_s, true);
+        }
 
         self.time_s += dt_s;
         self.step += 1;
@@ -309,7 +382,8 @@ impl<const D: usize> Solver<D> {
     /// (5) Collision model: fluid pairs closer than the collision distance that approach each
     /// other exchange momentum along their line of centres with restitution e (equal masses;
     /// walls are immovable). Jacobi-style: all impulses from the pre-collision velocities.
-    fn collide(&mut self, dt_s: f64) {
+    /// `walls_only`: fluid-wall pairs only.
+    fn collide(&mut self, dt_s: f64, walls_only: bool) {
         let c = &self.config;
         if c.collision_distance_m <= 0.0 {
             return;
@@ -317,6 +391,7 @@ impl<const D: usize> Solver<D> {
         let p = &self.particles;
         let nb = &self.neighbours;
         let d2 = c.collision_distance_m * c.collision_distance_m;
+        let d2_wall = c.wall_collision_distance_m * c.wall_collision_distance_m;
         let e = c.collision_restitution;
         let dv: Vec<Vector<D>> = (0..p.len())
             .into_par_iter()
@@ -333,17 +408,17 @@ impl<const D: usize> Solver<D> {
                     }
                     let r = nb.displacement(&p.position_m, i, j);
                     let r2 = r.norm_squared();
-                    if r2 >= d2 || r2 == 0.0 {
+                    let fluid_pair = p.kind[j] == ParticleKind::Fluid;
+                    if fluid_pair && walls_only {
+                        continue;
+                    }
+                    if r2 >= (if fluid_pair { d2 } else { d2_wall }) || r2 == 0.0 {
                         continue;
                     }
                     let n = r / r2.sqrt();
                     let approach = (p.velocity_m_s[i] - p.velocity_m_s[j]).dot(&n);
                     if approach > 0.0 {
-                        let share = if p.kind[j] == ParticleKind::Fluid {
-                            0.5
-                        } else {
-                            1.0
-                        };
+                        let share = if fluid_pair { 0.5 } else { 1.0 };
                         dv -= n * ((1.0 + e) * share * approach);
                     }
                 }

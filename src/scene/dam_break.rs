@@ -57,5 +57,6 @@ pub fn build<const D: usize>(
         particles,
         domain_min_m: -extent,
         domain_max_m: extent * 2.0,
+        moving: None,
     }
 }

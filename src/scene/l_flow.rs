@@ -58,6 +58,7 @@ pub fn build<const D: usize>(
         particles,
         domain_min_m: -size,
         domain_max_m: size * 2.0,
+        moving: None,
     }
 }
 

@@ -3,6 +3,7 @@ pub mod container;
 pub mod dam_break;
 pub mod l_flow;
 pub mod lattice;
+pub mod slump;
 
 use crate::mps::{ParticleKind, Particles, Vector};
 
@@ -12,6 +13,8 @@ pub struct Scene<const D: usize> {
     pub particles: Particles<D>,
     pub domain_min_m: Vector<D>,
     pub domain_max_m: Vector<D>,
+    /// Particles of a wall that the solver moves (the slump cone), if any.
+    pub moving: Option<std::ops::Range<usize>>,
 }
 
 /// Front position: distance from the wall at x = 0 to the far edge of the furthest fluid
