@@ -115,6 +115,22 @@ impl Checker {
         }
     }
 
+    /// Each length must hold at least two particle spacings.
+    fn two_spacings(&mut self, dims: &[(&str, f64)], spacing_m: f64) {
+        for &(field, x) in dims {
+            if x < 2.0 * spacing_m {
+                self.fail(
+                    field,
+                    format!(
+                        "must be >= 2 * spacing_m = {}, got {}",
+                        fmt_num(2.0 * spacing_m),
+                        fmt_num(x)
+                    ),
+                );
+            }
+        }
+    }
+
     fn int_at_least(&mut self, field: &str, x: u64, min: u64) -> bool {
         if x < min {
             self.fail(field, format!("must be >= {min}, got {x}"));
@@ -360,22 +376,12 @@ pub fn check(m: &Manifest) -> Vec<Issue> {
                     );
                 }
                 if spacing_ok {
-                    for (field, x) in dims {
-                        // The depth is used in 3D only.
-                        if field == "scene.tank_depth_m" && m.dimension != 3 {
-                            continue;
-                        }
-                        if x < 2.0 * m.spacing_m {
-                            c.fail(
-                                field,
-                                format!(
-                                    "must be >= 2 * spacing_m = {}, got {}",
-                                    fmt_num(2.0 * m.spacing_m),
-                                    fmt_num(x)
-                                ),
-                            );
-                        }
-                    }
+                    // The depth is used in 3D only.
+                    let used: Vec<(&str, f64)> = dims
+                        .into_iter()
+                        .filter(|(field, _)| *field != "scene.tank_depth_m" || m.dimension == 3)
+                        .collect();
+                    c.two_spacings(&used, m.spacing_m);
                 }
             }
         }
@@ -426,18 +432,7 @@ pub fn check(m: &Manifest) -> Vec<Issue> {
                 );
             }
             if spacing_ok {
-                for (field, x) in dims {
-                    if x < 2.0 * m.spacing_m {
-                        c.fail(
-                            field,
-                            format!(
-                                "must be >= 2 * spacing_m = {}, got {}",
-                                fmt_num(2.0 * m.spacing_m),
-                                fmt_num(x)
-                            ),
-                        );
-                    }
-                }
+                c.two_spacings(&dims, m.spacing_m);
             }
         }
     }
@@ -482,18 +477,7 @@ pub fn check(m: &Manifest) -> Vec<Issue> {
                 }
             }
             if spacing_ok {
-                for (field, x) in dims {
-                    if x < 2.0 * m.spacing_m {
-                        c.fail(
-                            field,
-                            format!(
-                                "must be >= 2 * spacing_m = {}, got {}",
-                                fmt_num(2.0 * m.spacing_m),
-                                fmt_num(x)
-                            ),
-                        );
-                    }
-                }
+                c.two_spacings(&dims, m.spacing_m);
             }
         }
     }
