@@ -248,5 +248,6 @@ fn resume_in<const D: usize>(job: Job) -> Result<RunResult, ResumeError> {
         summary: end.summary,
         stop_reason: end.stop_reason,
         wall_time_s: started.elapsed().as_secs_f64(),
+        timing: solver.timing,
     })
 }

@@ -4,7 +4,9 @@
 //! schedule, diagnostics, checkpoints, stop conditions, outcome).
 use crate::checkpoint;
 use crate::manifest::{Fluid, Manifest, PpeSource, Resolved, Scene as SceneSpec};
-use crate::mps::{MovingWall, ParticleKind, Particles, Rheology, Solver, SolverConfig, SourceTerm};
+use crate::mps::{
+    MovingWall, ParticleKind, Particles, Rheology, Solver, SolverConfig, SourceTerm, StageTimes,
+};
 use crate::proto::foxglove::PointCloud;
 use crate::proto::mps::v1::{CheckpointHash, Diagnostics, StateCheckpoint, Summary};
 use crate::record::{Outcome, RecordError, Recorder, RunHeader, point_cloud};
@@ -36,6 +38,8 @@ pub struct RunResult {
     pub stop_reason: String,
     /// Wall-clock seconds of the time loop (reported, never recorded).
     pub wall_time_s: f64,
+    /// Wall-clock seconds per solver stage (reported, never recorded).
+    pub timing: StageTimes,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -497,6 +501,7 @@ fn run_in<const D: usize>(
         summary: end.summary,
         stop_reason: end.stop_reason,
         wall_time_s: started.elapsed().as_secs_f64(),
+        timing: solver.timing,
     })
 }
 

@@ -177,3 +177,35 @@ fn python_reader_decodes_a_real_run() {
     assert!(out.status.success(), "{text}");
     eprintln!("{text}");
 }
+
+#[test]
+fn bench_reports_throughput_and_a_breakdown_that_adds_up() {
+    let exp = common::experiment("smoke_2d.yaml");
+    let assert = runner()
+        .arg("bench")
+        .arg(&exp)
+        .args(["--threads", "2", "--set", "time.end_s=0.05"])
+        .assert()
+        .success();
+    let stdout = String::from_utf8(assert.get_output().stdout.clone()).unwrap();
+    assert!(stdout.contains("246 particles"), "{stdout}");
+    assert!(stdout.contains("particle-steps/s"), "{stdout}");
+    // The six stages account for the whole wall time.
+    let shares: Vec<f64> = stdout
+        .lines()
+        .filter_map(|l| l.trim_end().strip_suffix('%'))
+        .map(|l| l.rsplit(' ').next().unwrap().parse().unwrap())
+        .collect();
+    assert_eq!(shares.len(), 6, "{stdout}");
+    let total: f64 = shares.iter().sum();
+    assert!(
+        (total - 100.0).abs() < 0.5,
+        "shares add to {total}: {stdout}"
+    );
+    assert!(shares.iter().all(|s| *s >= 0.0), "{stdout}");
+    runner()
+        .arg("bench")
+        .arg(common::experiment("l_flow_sweep.yaml"))
+        .assert()
+        .code(2);
+}

@@ -71,6 +71,18 @@ enum Command {
         #[arg(long)]
         canonical: bool,
     },
+    /// Run an experiment (recorded as usual) and report particle-steps per second and the
+    /// wall time split by solver stage and recording.
+    Bench {
+        manifest: PathBuf,
+        #[arg(long = "set", value_name = "KEY=VALUE")]
+        set: Vec<String>,
+        #[arg(long)]
+        threads: Option<usize>,
+        /// Keep the MCAP file in this directory (default: a temporary one, removed).
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
     /// Replay a run from the manifest stored in its MCAP file and compare every checkpoint
     /// bit for bit (exit 0 identical, 1 not, 2 file unusable); or, with --trend DIR, check
     /// that a metric falls as a manifest value rises across the runs in DIR.
@@ -178,6 +190,12 @@ fn main() -> ExitCode {
                 ExitCode::from(EXIT_BAD_INPUT)
             }
         },
+        Some(Command::Bench {
+            manifest,
+            set,
+            threads,
+            out,
+        }) => bench_command(&manifest, &set, threads, out),
         Some(Command::Verify(args)) => verify_command(args),
         Some(Command::Resume {
             file,
@@ -354,6 +372,95 @@ fn report_result(result: Result<PathBuf, report::ReportError>) -> ExitCode {
             ExitCode::from(EXIT_BAD_INPUT)
         }
     }
+}
+
+/// `runner bench`: one run, then particle-steps per second and where the time went.
+fn bench_command(
+    path: &std::path::Path,
+    set: &[String],
+    threads: Option<usize>,
+    out: Option<PathBuf>,
+) -> ExitCode {
+    if threads == Some(0) {
+        eprintln!("error: --threads must be at least 1");
+        return ExitCode::from(EXIT_BAD_INPUT);
+    }
+    let resolved = match sweep::load_plan(path, set) {
+        Ok(sweep::Plan::Single(r)) => *r,
+        Ok(sweep::Plan::Sweep(_)) => {
+            eprintln!("error: runner bench takes a single experiment, not a sweep");
+            return ExitCode::from(EXIT_BAD_INPUT);
+        }
+        Err(e) => {
+            eprintln!("error: {e}");
+            return ExitCode::from(EXIT_BAD_INPUT);
+        }
+    };
+    let temporary = out.is_none();
+    let out_dir = out
+        .unwrap_or_else(|| std::env::temp_dir().join(format!("mps_bench-{}", std::process::id())));
+    let options = RunOptions {
+        out_dir: out_dir.clone(),
+        threads,
+        progress: false,
+        interrupt: interrupt_flag(),
+    };
+    let result = match run(&resolved, &options) {
+        Ok(r) => r,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return ExitCode::from(EXIT_INTERNAL);
+        }
+    };
+    let metric = |k: &str| result.summary.metrics.get(k).copied().unwrap_or(f64::NAN);
+    let (steps, particles) = (metric("steps"), metric("particle_count"));
+    let wall = result.wall_time_s.max(1e-12);
+    let t = result.timing;
+    let threads_used =
+        threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    println!(
+        "{} ({}D, spacing {} m): {} particles ({} fluid), {} steps to t = {} s, {} threads",
+        resolved.manifest.name,
+        resolved.manifest.dimension,
+        resolved.manifest.spacing_m,
+        particles,
+        metric("fluid_particle_count"),
+        steps,
+        metric("simulated_time_s"),
+        threads_used
+    );
+    println!(
+        "outcome {}; wall time {:.3} s; {:.0} particle-steps/s",
+        result.outcome.as_str(),
+        wall,
+        steps * particles / wall
+    );
+    let other = t.step_total_s
+        - t.neighbours_s
+        - t.viscosity_s
+        - t.pressure_assembly_s
+        - t.pressure_solve_s;
+    let rows = [
+        ("neighbour search", t.neighbours_s),
+        ("viscosity (strain rate, assembly, CG)", t.viscosity_s),
+        (
+            "PPE assembly (n*, surface, source, CSR)",
+            t.pressure_assembly_s,
+        ),
+        ("PPE solve (CG)", t.pressure_solve_s),
+        ("other solver stages (collision, correction)", other),
+        ("recording and output", wall - t.step_total_s),
+    ];
+    println!("{:<46} {:>9} {:>7}", "stage", "seconds", "share");
+    for (name, seconds) in rows {
+        println!("{name:<46} {seconds:>9.3} {:>6.1}%", 100.0 * seconds / wall);
+    }
+    if temporary {
+        let _ = std::fs::remove_dir_all(&out_dir);
+    } else {
+        println!("{}", result.path.display());
+    }
+    outcome_code(&result.outcome)
 }
 
 fn run_command(args: RunArgs) -> ExitCode {

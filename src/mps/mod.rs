@@ -11,4 +11,4 @@ pub mod viscosity;
 
 pub use particles::{ParticleKind, Particles, Vector};
 pub use rheology::Rheology;
-pub use solver::{MovingWall, Solver, SolverConfig, SourceTerm, StepError, StepReport};
+pub use solver::{MovingWall, Solver, SolverConfig, SourceTerm, StageTimes, StepError, StepReport};

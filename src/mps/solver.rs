@@ -9,6 +9,7 @@ use super::reduce::max_by;
 use super::rheology::Rheology;
 use super::viscosity::{ViscousSettings, predict_velocity};
 use rayon::prelude::*;
+use std::time::Instant;
 
 /// Physical and numerical parameters of the solver, all in SI units.
 #[derive(Debug, Clone, PartialEq)]
@@ -108,6 +109,17 @@ pub fn wall_collision_distance_m(
     }
 }
 
+/// Wall-clock seconds spent in each stage of the step, summed over steps (for benchmarks;
+/// never part of the state or of any recording).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct StageTimes {
+    pub neighbours_s: f64,
+    pub viscosity_s: f64,
+    pub pressure_assembly_s: f64,
+    pub pressure_solve_s: f64,
+    pub step_total_s: f64,
+}
+
 /// Why a step could not be completed.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum StepError {
@@ -165,6 +177,8 @@ pub struct Solver<const D: usize> {
     listed_at_m: Vec<Vector<D>>,
     /// Rebuild the lists at every stage (slower; for checking that reuse changes no bit).
     pub fresh_lists: bool,
+    /// Time spent per stage so far.
+    pub timing: StageTimes,
 }
 
 /// Extra reach of the neighbour lists beyond the Laplacian radius, in spacings: lists stay
@@ -187,6 +201,7 @@ impl<const D: usize> Solver<D> {
             neighbours: Neighbours::default(),
             listed_at_m: Vec::new(),
             fresh_lists: false,
+            timing: StageTimes::default(),
         }
     }
 
@@ -238,6 +253,13 @@ impl<const D: usize> Solver<D> {
 
     /// Advances the state by dt_s.
     pub fn step(&mut self, dt_s: f64) -> Result<StepReport, StepError> {
+        let started = Instant::now();
+        let result = self.step_stages(dt_s);
+        self.timing.step_total_s += started.elapsed().as_secs_f64();
+        result
+    }
+
+    fn step_stages(&mut self, dt_s: f64) -> Result<StepReport, StepError> {
         // (1) Viscosity (implicit, with the effective viscosity of the rheology) and gravity
         // give the predicted velocity u*, then (2) r* = r + dt u*.
         if let Some(w) = &self.config.moving_wall {
@@ -252,6 +274,7 @@ impl<const D: usize> Solver<D> {
             SourceTerm::Mixed => Some(self.number_density()),
             SourceTerm::NumberDensity => None,
         };
+        let viscosity_started = Instant::now();
         let stage = predict_velocity(
             &self.particles,
             &self.neighbours,
@@ -260,6 +283,7 @@ impl<const D: usize> Solver<D> {
             self.gravity(),
             dt_s,
         );
+        self.timing.viscosity_s += viscosity_started.elapsed().as_secs_f64();
         if !stage.solve.converged {
             return Err(StepError::ViscosityNotConverged {
                 residual: stage.solve.relative_residual,
@@ -290,6 +314,7 @@ impl<const D: usize> Solver<D> {
         self.collide(dt_s, false);
 
         // (3) Number density n*, free surface, pressure Poisson equation.
+        let pressure_started = Instant::now();
         let number_density = self.number_density();
         let threshold = self.config.surface_threshold * self.refs.n0;
         let surface: Vec<bool> = number_density.iter().map(|&n| n < threshold).collect();
@@ -298,7 +323,9 @@ impl<const D: usize> Solver<D> {
         let surface_count = (0..self.particles.len())
             .filter(|&i| self.particles.kind[i] == ParticleKind::Fluid && surface[i])
             .count();
-        let ppe = self.solve_pressure(dt_s, &source, &surface);
+        let (ppe, solve_s) = self.solve_pressure(dt_s, &source, &surface);
+        self.timing.pressure_solve_s += solve_s;
+        self.timing.pressure_assembly_s += pressure_started.elapsed().as_secs_f64() - solve_s;
         if !ppe.converged {
             return Err(StepError::PressureNotConverged {
                 residual: ppe.relative_residual,
@@ -358,6 +385,12 @@ impl<const D: usize> Solver<D> {
     /// Makes sure the lists hold every active pair closer than the Laplacian radius: rebuilt
     /// when some particle has moved more than half the skin since the last build.
     fn rebuild_neighbours(&mut self) {
+        let started = Instant::now();
+        self.refresh_lists();
+        self.timing.neighbours_s += started.elapsed().as_secs_f64();
+    }
+
+    fn refresh_lists(&mut self) {
         let skin = LIST_SKIN * self.config.spacing_m;
         let p = &self.particles;
         let valid = self.listed_at_m.len() == p.len()
@@ -482,7 +515,13 @@ impl<const D: usize> Solver<D> {
     /// PPE (Koshizuka & Oka): -<lap p>_i + rho kappa p_i / dt^2 = source_i for fluid and wall
     /// particles not on the surface; p = 0 on the surface (Dirichlet).
     /// Assembled once in CSR and solved by Jacobi-PCG; negative pressure is clipped to 0.
-    fn solve_pressure(&mut self, dt_s: f64, source: &[f64], surface: &[bool]) -> SolveReport {
+    /// Returns the solver's report and the seconds spent in the CG solve.
+    fn solve_pressure(
+        &mut self,
+        dt_s: f64,
+        source: &[f64],
+        surface: &[bool],
+    ) -> (SolveReport, f64) {
         let c = &self.config;
         let p = &self.particles;
         let nb = &self.neighbours;
@@ -541,6 +580,7 @@ impl<const D: usize> Solver<D> {
         // Warm start from the previous pressure (part of the recorded state, so replays and
         // resumed runs start the solver from the same guess).
         let mut solution: Vec<f64> = rows.iter().map(|&i| p.pressure_pa[i]).collect();
+        let solve_started = Instant::now();
         let report = solve_pcg(
             &matrix,
             &rhs,
@@ -548,12 +588,13 @@ impl<const D: usize> Solver<D> {
             c.ppe_tolerance,
             c.ppe_max_iterations,
         );
+        let solve_s = solve_started.elapsed().as_secs_f64();
         let pressure = &mut self.particles.pressure_pa;
         pressure.iter_mut().for_each(|v| *v = 0.0);
         for (k, &i) in rows.iter().enumerate() {
             pressure[i] = solution[k].max(0.0);
         }
-        report
+        (report, solve_s)
     }
 
     /// u += -dt/rho <grad p>, r += dt * (change of u), with the gradient model (eq. 3) using
