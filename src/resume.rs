@@ -8,7 +8,7 @@
 use crate::checkpoint;
 use crate::manifest::Resolved;
 use crate::proto::mps::v1::{CheckpointHash, StateCheckpoint};
-use crate::record::{Recorder, RunHeader, partial_path, read_run};
+use crate::record::{Recorder, partial_path, read_run};
 use crate::restore::{Logged, is_scheduled, manifest_of, read_messages, restore_solver};
 use crate::run::{LoopControl, LoopStart, RunError, RunResult, output_path, time_loop, time_ns};
 use std::path::{Path, PathBuf};
@@ -176,16 +176,9 @@ fn resume_in<const D: usize>(job: Job) -> Result<RunResult, ResumeError> {
     } else {
         None
     };
-    let header = RunHeader {
-        manifest_source: &resolved.source_text,
-        overrides: &resolved.overrides,
-        canonical: &resolved.canonical,
-        experiment_sha256: &resolved.hash_hex,
-        name: &m.name,
-        threads,
-    };
     let started = std::time::Instant::now();
-    let mut recorder = Recorder::create(&final_path, &header).map_err(RunError::from)?;
+    let mut recorder = Recorder::create(&final_path, &crate::run::run_header(resolved, threads))
+        .map_err(RunError::from)?;
     let (index, step, time) = (
         from.index.to_string(),
         from.step.to_string(),

@@ -94,6 +94,18 @@ pub fn thread_pool(threads: Option<usize>) -> Result<(rayon::ThreadPool, usize),
     Ok((pool, threads))
 }
 
+/// What a run file records about its experiment (the same for a run and its resumption).
+pub fn run_header(resolved: &Resolved, threads: usize) -> RunHeader<'_> {
+    RunHeader {
+        manifest_source: &resolved.source_text,
+        overrides: &resolved.overrides,
+        canonical: &resolved.canonical,
+        experiment_sha256: &resolved.hash_hex,
+        name: &resolved.manifest.name,
+        threads,
+    }
+}
+
 /// Builds the scene a manifest describes.
 pub fn build_scene<const D: usize>(m: &Manifest) -> Scene<D> {
     match &m.scene {
@@ -471,15 +483,7 @@ fn run_in<const D: usize>(
     let config = solver_config(m, &scene);
     let mut solver = Solver::new(config, scene.particles);
     let path = output_path(&options.out_dir, resolved);
-    let header = RunHeader {
-        manifest_source: &resolved.source_text,
-        overrides: &resolved.overrides,
-        canonical: &resolved.canonical,
-        experiment_sha256: &resolved.hash_hex,
-        name: &m.name,
-        threads,
-    };
-    let mut recorder = Recorder::create(&path, &header)?;
+    let mut recorder = Recorder::create(&path, &run_header(resolved, threads))?;
     let started = std::time::Instant::now();
     let control = LoopControl {
         interrupt: options.interrupt.clone(),
