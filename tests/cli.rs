@@ -190,13 +190,13 @@ fn bench_reports_throughput_and_a_breakdown_that_adds_up() {
     let stdout = String::from_utf8(assert.get_output().stdout.clone()).unwrap();
     assert!(stdout.contains("246 particles"), "{stdout}");
     assert!(stdout.contains("particle-steps/s"), "{stdout}");
-    // The six stages account for the whole wall time.
+    // The seven stages account for the whole wall time.
     let shares: Vec<f64> = stdout
         .lines()
         .filter_map(|l| l.trim_end().strip_suffix('%'))
         .map(|l| l.rsplit(' ').next().unwrap().parse().unwrap())
         .collect();
-    assert_eq!(shares.len(), 6, "{stdout}");
+    assert_eq!(shares.len(), 7, "{stdout}");
     let total: f64 = shares.iter().sum();
     assert!(
         (total - 100.0).abs() < 0.5,

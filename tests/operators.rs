@@ -3,7 +3,7 @@ use mps_runner::mps::Vector;
 use mps_runner::mps::grid::Neighbours;
 use mps_runner::mps::kernel::{RefValues, weight};
 use mps_runner::mps::operators::{gradient, laplacian, number_density};
-use mps_runner::mps::pressure::{CsrMatrix, solve_pcg};
+use mps_runner::mps::pressure::{CsrMatrix, solve_pcg, solve_pcg_many};
 
 /// Square/cubic lattice of side `side` cells with spacing l0; returns positions and the index
 /// of a particle in the middle.
@@ -150,15 +150,13 @@ fn pcg_meets_its_residual_tolerance() {
     let x_true: Vec<f64> = (0..m * m)
         .map(|i| ((i * 37 % 101) as f64 / 101.0) - 0.3)
         .collect();
-    let mut b = vec![0.0; m * m];
-    a.multiply(&x_true, &mut b);
+    let b = product(&a, &x_true);
     let mut x = vec![0.0; m * m];
     let tol = 1e-10;
     let report = solve_pcg(&a, &b, &mut x, tol, 10_000);
     assert!(report.converged, "{report:?}");
     // The true residual (not the recursively updated one) meets the tolerance.
-    let mut ax = vec![0.0; m * m];
-    a.multiply(&x, &mut ax);
+    let ax = product(&a, &x);
     let r: f64 = ax
         .iter()
         .zip(&b)
@@ -177,4 +175,42 @@ fn pcg_meets_its_residual_tolerance() {
     x.iter_mut().for_each(|v| *v = 0.0);
     let capped = solve_pcg(&a, &b, &mut x, tol, 5);
     assert!(!capped.converged && capped.iterations == 5);
+}
+
+fn product(a: &CsrMatrix, x: &[f64]) -> Vec<f64> {
+    let x: Vec<[f64; 1]> = x.iter().map(|&v| [v]).collect();
+    let mut y = vec![[0.0]; x.len()];
+    a.multiply(&x, &mut y);
+    y.iter().map(|v| v[0]).collect()
+}
+
+#[test]
+fn side_by_side_solves_give_the_bits_of_single_solves() {
+    // Three right-hand sides, one of them zero, solved together and one by one (the viscous
+    // stage solves the velocity components together).
+    let m = 30;
+    let a = poisson(m);
+    let n = m * m;
+    let b: Vec<[f64; 3]> = (0..n)
+        .map(|i| [((i * 37 % 101) as f64) - 50.0, 0.0, (i % 7) as f64 * 1e-3])
+        .collect();
+    let guess: Vec<[f64; 3]> = (0..n).map(|i| [0.0, 1.0, (i % 3) as f64]).collect();
+    let mut together = guess.clone();
+    let reports = solve_pcg_many(&a, &b, &mut together, 1e-10, 10_000);
+    for axis in 0..3 {
+        let b_axis: Vec<f64> = b.iter().map(|v| v[axis]).collect();
+        let mut alone: Vec<f64> = guess.iter().map(|v| v[axis]).collect();
+        let report = solve_pcg(&a, &b_axis, &mut alone, 1e-10, 10_000);
+        assert_eq!(report, reports[axis], "axis {axis}");
+        for i in 0..n {
+            assert_eq!(
+                alone[i].to_bits(),
+                together[i][axis].to_bits(),
+                "axis {axis} row {i}"
+            );
+        }
+    }
+    assert_eq!(reports[1].iterations, 0);
+    assert!(reports[0].iterations > 10 && reports[2].iterations > 10);
+    assert_ne!(reports[0].iterations, reports[2].iterations);
 }

@@ -437,19 +437,40 @@ fn bench_command(
     );
     let other = t.step_total_s
         - t.neighbours_s
+        - t.kernel_pairs_s
         - t.viscosity_s
         - t.pressure_assembly_s
         - t.pressure_solve_s;
+    let per_step = |total: u64| total as f64 / steps.max(1.0);
     let rows = [
-        ("neighbour search", t.neighbours_s),
-        ("viscosity (strain rate, assembly, CG)", t.viscosity_s),
         (
-            "PPE assembly (n*, surface, source, CSR)",
+            format!("neighbour lists ({} cell-grid builds)", t.list_builds),
+            t.neighbours_s,
+        ),
+        (
+            "kernel pairs (lists cut to radii)".to_string(),
+            t.kernel_pairs_s,
+        ),
+        (
+            format!(
+                "viscosity (strain, assembly, CG {:.1} it/step)",
+                per_step(t.viscosity_iterations)
+            ),
+            t.viscosity_s,
+        ),
+        (
+            "PPE assembly (n*, surface, source, CSR)".to_string(),
             t.pressure_assembly_s,
         ),
-        ("PPE solve (CG)", t.pressure_solve_s),
-        ("other solver stages (collision, correction)", other),
-        ("recording and output", wall - t.step_total_s),
+        (
+            format!("PPE solve (CG {:.1} it/step)", per_step(t.ppe_iterations)),
+            t.pressure_solve_s,
+        ),
+        (
+            "other solver stages (collision, correction)".to_string(),
+            other,
+        ),
+        ("recording and output".to_string(), wall - t.step_total_s),
     ];
     println!("{:<46} {:>9} {:>7}", "stage", "seconds", "share");
     for (name, seconds) in rows {

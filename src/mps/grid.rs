@@ -6,6 +6,10 @@ use rayon::prelude::*;
 /// resulting order) never depends on the thread count.
 const LIST_CHUNK: usize = 512;
 
+/// The same for cutting lists to a radius: smaller, since the work is uneven (only fluid and
+/// nearby walls have lists, often in a short range of indices).
+const FILTER_CHUNK: usize = 64;
+
 /// Neighbour lists in compressed rows: the neighbours of i are
 /// `indices[offsets[i]..offsets[i + 1]]`, in ascending index order.
 #[derive(Debug, Clone, Default)]
@@ -50,7 +54,139 @@ impl Neighbours {
         cutoff_m: f64,
         active: impl Fn(usize) -> bool + Sync,
     ) -> Self {
-        Self::build_general(positions, cutoff_m, None, active)
+        Self::build_general(positions, cutoff_m, None, &active, &active)
+    }
+
+    /// As [`Neighbours::build_active`], but only particles with `centre(i)` (and active) get a
+    /// list of their own; the others stay neighbours of those (dummy wall layers: no operator
+    /// is ever evaluated at them).
+    pub fn build_centres<const D: usize>(
+        positions: &[Vector<D>],
+        cutoff_m: f64,
+        active: impl Fn(usize) -> bool + Sync,
+        centre: impl Fn(usize) -> bool + Sync,
+    ) -> Self {
+        Self::build_general(positions, cutoff_m, None, &active, &centre)
+    }
+
+    /// The pairs of these lists closer than `radius_m` (and not coincident), in the same order:
+    /// exactly the pairs with a nonzero weight w(r) for that radius. Operators that skip
+    /// zero-weight pairs give the same bits on the filtered lists, and visit far fewer pairs
+    /// (in 3D the number-density radius holds a quarter of the Verlet list).
+    pub fn within<const D: usize>(&self, positions: &[Vector<D>], radius_m: f64) -> Self {
+        self.within_where(positions, radius_m, |_| true)
+    }
+
+    /// As [`Neighbours::within`] for the lists of particles with `keep(i)`; the others get
+    /// empty lists.
+    pub fn within_where<const D: usize>(
+        &self,
+        positions: &[Vector<D>],
+        radius_m: f64,
+        keep: impl Fn(usize) -> bool + Sync,
+    ) -> Self {
+        self.within_two(positions, radius_m, radius_m, keep).0
+    }
+
+    /// Both cuts at once, to `outer_m` and to `inner_m <= outer_m`, for particles with
+    /// `keep(i)` (one distance per pair).
+    pub fn within_two<const D: usize>(
+        &self,
+        positions: &[Vector<D>],
+        outer_m: f64,
+        inner_m: f64,
+        keep: impl Fn(usize) -> bool + Sync,
+    ) -> (Self, Self) {
+        debug_assert!(inner_m <= outer_m);
+        let n = self.offsets.len() - 1;
+        type Cut = (Vec<usize>, Vec<u32>);
+        let chunks: Vec<(Cut, Cut)> = (0..n.div_ceil(FILTER_CHUNK))
+            .into_par_iter()
+            .with_max_len(1)
+            .map(|chunk| {
+                let range = chunk * FILTER_CHUNK..((chunk + 1) * FILTER_CHUNK).min(n);
+                // Room for every candidate; written without a branch per pair (about a third of
+                // the candidates fail, in no predictable pattern), then cut to length.
+                let capacity = self.offsets[range.end] - self.offsets[range.start];
+                let (mut outer, mut inner) = (vec![0u32; capacity], vec![0u32; capacity]);
+                let (mut counts_outer, mut counts_inner) = (Vec::new(), Vec::new());
+                let (mut len_outer, mut len_inner) = (0, 0);
+                for i in range {
+                    let before = (len_outer, len_inner);
+                    if keep(i) {
+                        for &j in self.of(i) {
+                            let d = self.displacement(positions, i, j as usize).norm();
+                            outer[len_outer] = j;
+                            inner[len_inner] = j;
+                            len_outer += usize::from(d > 0.0 && d < outer_m);
+                            len_inner += usize::from(d > 0.0 && d < inner_m);
+                        }
+                    }
+                    counts_outer.push(len_outer - before.0);
+                    counts_inner.push(len_inner - before.1);
+                }
+                outer.truncate(len_outer);
+                inner.truncate(len_inner);
+                ((counts_outer, outer), (counts_inner, inner))
+            })
+            .collect();
+        let (outer, inner): (Vec<Cut>, Vec<Cut>) = chunks.into_iter().unzip();
+        (
+            Self::from_chunks(outer_m, self.period_x_m, outer),
+            Self::from_chunks(inner_m, self.period_x_m, inner),
+        )
+    }
+
+    /// Marks every particle that is in some list, over `n` particles.
+    pub fn listed(&self, n: usize) -> Vec<bool> {
+        let mut mark = vec![false; n];
+        for &j in &self.indices {
+            mark[j as usize] = true;
+        }
+        mark
+    }
+
+    /// Row by row, the list of `self` where it is not empty, else the list of `other` (for
+    /// lists built for disjoint sets of particles).
+    pub fn merged(&self, other: &Self) -> Self {
+        let n = self.offsets.len() - 1;
+        assert_eq!(n, other.offsets.len() - 1);
+        let mut offsets = Vec::with_capacity(n + 1);
+        offsets.push(0);
+        let mut indices = Vec::with_capacity(self.indices.len() + other.indices.len());
+        for i in 0..n {
+            let own = self.of(i);
+            indices.extend_from_slice(if own.is_empty() { other.of(i) } else { own });
+            offsets.push(indices.len());
+        }
+        Self {
+            cutoff_m: self.cutoff_m,
+            period_x_m: self.period_x_m,
+            offsets,
+            indices,
+        }
+    }
+
+    fn from_chunks(
+        cutoff_m: f64,
+        period_x_m: Option<f64>,
+        chunks: Vec<(Vec<usize>, Vec<u32>)>,
+    ) -> Self {
+        let mut offsets = Vec::with_capacity(chunks.iter().map(|c| c.0.len()).sum::<usize>() + 1);
+        offsets.push(0);
+        let mut indices = Vec::with_capacity(chunks.iter().map(|c| c.1.len()).sum());
+        for (counts, list) in chunks {
+            for c in counts {
+                offsets.push(offsets.last().unwrap() + c);
+            }
+            indices.extend_from_slice(&list);
+        }
+        Self {
+            cutoff_m,
+            period_x_m,
+            offsets,
+            indices,
+        }
     }
 
     /// As [`Neighbours::build`] with x periodic of period `period_x_m` (all particles must lie
@@ -64,14 +200,15 @@ impl Neighbours {
             period_x_m >= 3.0 * cutoff_m,
             "period {period_x_m} shorter than three cutoffs"
         );
-        Self::build_general(positions, cutoff_m, Some(period_x_m), |_| true)
+        Self::build_general(positions, cutoff_m, Some(period_x_m), &|_| true, &|_| true)
     }
 
     fn build_general<const D: usize>(
         positions: &[Vector<D>],
         cutoff_m: f64,
         period_x_m: Option<f64>,
-        active: impl Fn(usize) -> bool + Sync,
+        active: &(impl Fn(usize) -> bool + Sync),
+        centre: &(impl Fn(usize) -> bool + Sync),
     ) -> Self {
         let n = positions.len();
         if n == 0 {
@@ -140,13 +277,14 @@ impl Neighbours {
         let self_displacement = |j: usize, i: usize| image.displacement(positions, i, j);
         let chunks: Vec<(Vec<usize>, Vec<u32>)> = (0..n.div_ceil(LIST_CHUNK))
             .into_par_iter()
+            .with_max_len(1)
             .map(|chunk| {
                 let range = chunk * LIST_CHUNK..((chunk + 1) * LIST_CHUNK).min(n);
                 let mut counts = Vec::with_capacity(range.len());
                 let mut list = Vec::with_capacity(range.len() * 32);
                 for i in range {
                     let before = list.len();
-                    if !active(i) {
+                    if !(active(i) && centre(i)) {
                         counts.push(0);
                         continue;
                     }
@@ -190,20 +328,53 @@ impl Neighbours {
                 (counts, list)
             })
             .collect();
-        let mut offsets = Vec::with_capacity(n + 1);
-        offsets.push(0);
-        let mut indices = Vec::with_capacity(chunks.iter().map(|c| c.1.len()).sum());
-        for (counts, list) in chunks {
-            for c in counts {
-                offsets.push(offsets.last().unwrap() + c);
-            }
-            indices.extend_from_slice(&list);
-        }
+        Self::from_chunks(cutoff_m, period_x_m, chunks)
+    }
+}
+
+/// The pairs of the (Verlet) lists that carry weight at the current positions, one list per
+/// kernel radius: `near` within the number-density/gradient radius, `lap` within the Laplacian
+/// radius. Same order as the lists they come from.
+#[derive(Debug, Clone, Default)]
+pub struct KernelPairs {
+    pub near: Neighbours,
+    pub lap: Neighbours,
+}
+
+impl KernelPairs {
+    /// Pairs at every particle.
+    pub fn new<const D: usize>(
+        lists: &Neighbours,
+        positions: &[Vector<D>],
+        radius_n_m: f64,
+        radius_lap_m: f64,
+    ) -> Self {
+        let (lap, near) =
+            lists.within_two(positions, radius_lap_m.max(radius_n_m), radius_n_m, |_| {
+                true
+            });
+        Self { near, lap }
+    }
+
+    /// Pairs at the fluid particles and at the wall particles within the Laplacian radius of
+    /// some fluid particle (at these positions, so independent of when `lists` were built);
+    /// other particles get none.
+    pub fn near_fluid<const D: usize>(
+        lists: &Neighbours,
+        positions: &[Vector<D>],
+        radius_n_m: f64,
+        radius_lap_m: f64,
+        is_fluid: impl Fn(usize) -> bool + Sync,
+    ) -> Self {
+        let radius = radius_lap_m.max(radius_n_m);
+        let (fluid_lap, fluid_near) = lists.within_two(positions, radius, radius_n_m, &is_fluid);
+        let touched = fluid_lap.listed(positions.len());
+        let (wall_lap, wall_near) = lists.within_two(positions, radius, radius_n_m, |i| {
+            touched[i] && !is_fluid(i)
+        });
         Self {
-            cutoff_m,
-            period_x_m,
-            offsets,
-            indices,
+            near: fluid_near.merged(&wall_near),
+            lap: fluid_lap.merged(&wall_lap),
         }
     }
 }

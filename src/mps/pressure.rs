@@ -1,5 +1,6 @@
-//! Pressure Poisson equation: assembly in CSR and a Jacobi-preconditioned conjugate gradient.
-use super::reduce::{MIN_PARALLEL_LEN, dot, sum_by};
+//! Sparse symmetric systems of the step (PPE and implicit viscosity): assembly in CSR and a
+//! Jacobi-preconditioned conjugate gradient.
+use super::reduce::{MIN_PARALLEL_LEN, PARTICLES_PER_TASK, sum_by};
 use rayon::prelude::*;
 
 /// Symmetric sparse matrix in compressed rows (diagonal stored separately).
@@ -11,47 +12,75 @@ pub struct CsrMatrix {
     pub values: Vec<f64>,
 }
 
-/// One assembled row of a symmetric system: diagonal and off-diagonal (column, value) entries.
-#[derive(Debug, Clone, Default)]
-pub struct Row {
-    pub diagonal: f64,
-    pub entries: Vec<(u32, f64)>,
-}
-
 impl CsrMatrix {
-    /// Packs assembled rows, in order, into compressed rows.
-    pub fn from_rows<'a>(rows: impl IntoIterator<Item = &'a Row>) -> Self {
+    /// Assembles `n` rows in parallel, in fixed chunks of rows (so no allocation per row):
+    /// `row(k, columns, values)` appends the off-diagonal entries of row k and returns its
+    /// diagonal and one more value of the caller's per row.
+    pub fn assemble<T: Send>(
+        n: usize,
+        row: impl Fn(usize, &mut Vec<u32>, &mut Vec<f64>) -> (f64, T) + Sync,
+    ) -> (Self, Vec<T>) {
+        type Chunk<T> = (Vec<f64>, Vec<usize>, Vec<u32>, Vec<f64>, Vec<T>);
+        let chunks: Vec<Chunk<T>> = (0..n.div_ceil(PARTICLES_PER_TASK))
+            .into_par_iter()
+            .with_max_len(1)
+            .map(|c| {
+                let range = c * PARTICLES_PER_TASK..((c + 1) * PARTICLES_PER_TASK).min(n);
+                let mut diagonal = Vec::with_capacity(range.len());
+                let mut ends = Vec::with_capacity(range.len());
+                let mut extra = Vec::with_capacity(range.len());
+                let (mut columns, mut values) = (Vec::new(), Vec::new());
+                for k in range {
+                    let (d, t) = row(k, &mut columns, &mut values);
+                    diagonal.push(d);
+                    ends.push(columns.len());
+                    extra.push(t);
+                }
+                (diagonal, ends, columns, values, extra)
+            })
+            .collect();
         let mut m = CsrMatrix {
-            row_offsets: vec![0],
-            ..Default::default()
+            diagonal: Vec::with_capacity(n),
+            row_offsets: Vec::with_capacity(n + 1),
+            columns: Vec::with_capacity(chunks.iter().map(|c| c.2.len()).sum()),
+            values: Vec::with_capacity(chunks.iter().map(|c| c.3.len()).sum()),
         };
-        for row in rows {
-            m.diagonal.push(row.diagonal);
-            for &(c, v) in &row.entries {
-                m.columns.push(c);
-                m.values.push(v);
-            }
-            m.row_offsets.push(m.columns.len());
+        m.row_offsets.push(0);
+        let mut extras = Vec::with_capacity(n);
+        for (diagonal, ends, columns, values, extra) in chunks {
+            let base = m.columns.len();
+            m.diagonal.extend_from_slice(&diagonal);
+            m.row_offsets.extend(ends.iter().map(|e| base + e));
+            m.columns.extend_from_slice(&columns);
+            m.values.extend_from_slice(&values);
+            extras.extend(extra);
         }
-        m
+        (m, extras)
     }
 
     pub fn rows(&self) -> usize {
         self.diagonal.len()
     }
 
-    /// y = A x, each row gathered by its own task in a fixed order.
-    pub fn multiply(&self, x: &[f64], y: &mut [f64]) {
+    /// y = A x for M vectors at once (one pass over the matrix), each row gathered by its own
+    /// task in a fixed order: every component gets the bits of a single product.
+    pub fn multiply<const M: usize>(&self, x: &[[f64; M]], y: &mut [[f64; M]]) {
         assert_eq!(x.len(), self.rows());
         y.par_iter_mut()
             .with_min_len(MIN_PARALLEL_LEN)
             .enumerate()
             .for_each(|(i, yi)| {
                 let range = self.row_offsets[i]..self.row_offsets[i + 1];
-                let mut s = self.diagonal[i] * x[i];
+                let mut s = [0.0; M];
+                for m in 0..M {
+                    s[m] = self.diagonal[i] * x[i][m];
+                }
                 // Zipped slices: no bounds check per entry but the column lookup.
                 for (&c, &v) in self.columns[range.clone()].iter().zip(&self.values[range]) {
-                    s += v * x[c as usize];
+                    let xc = &x[c as usize];
+                    for m in 0..M {
+                        s[m] += v * xc[m];
+                    }
                 }
                 *yi = s;
             });
@@ -77,15 +106,43 @@ pub fn solve_pcg(
     tolerance: f64,
     max_iterations: u32,
 ) -> SolveReport {
+    let b: Vec<[f64; 1]> = b.iter().map(|&v| [v]).collect();
+    let mut x1: Vec<[f64; 1]> = x.iter().map(|&v| [v]).collect();
+    let [report] = solve_pcg_many(a, &b, &mut x1, tolerance, max_iterations);
+    for (x, v) in x.iter_mut().zip(&x1) {
+        *x = v[0];
+    }
+    report
+}
+
+/// M independent solves A x_m = b_m with the same matrix (the velocity components of the
+/// viscous stage), run side by side so that each matrix product serves all of them. Every
+/// component goes through exactly the operations of its own [`solve_pcg`] and stops at its
+/// own convergence: the bits do not depend on M.
+pub fn solve_pcg_many<const M: usize>(
+    a: &CsrMatrix,
+    b: &[[f64; M]],
+    x: &mut [[f64; M]],
+    tolerance: f64,
+    max_iterations: u32,
+) -> [SolveReport; M] {
     let n = a.rows();
-    let b_norm = dot(b, b).sqrt();
-    if n == 0 || b_norm == 0.0 {
-        x.iter_mut().for_each(|v| *v = 0.0);
-        return SolveReport {
-            iterations: 0,
-            relative_residual: 0.0,
-            converged: true,
-        };
+    let dot_m = |u: &[[f64; M]], v: &[[f64; M]], m: usize| sum_by(n, |i| u[i][m] * v[i][m]);
+    let b_norm: [f64; M] = std::array::from_fn(|m| dot_m(b, b, m).sqrt());
+    let mut reports = [SolveReport {
+        iterations: 0,
+        relative_residual: 0.0,
+        converged: true,
+    }; M];
+    // Components with b = 0 have the solution 0.
+    let mut running: [bool; M] = std::array::from_fn(|m| n > 0 && b_norm[m] != 0.0);
+    for m in 0..M {
+        if !running[m] {
+            x.iter_mut().for_each(|v| v[m] = 0.0);
+        }
+    }
+    if !running.iter().any(|&r| r) {
+        return reports;
     }
     let inv_diag: Vec<f64> = a
         .diagonal
@@ -93,59 +150,94 @@ pub fn solve_pcg(
         .with_min_len(MIN_PARALLEL_LEN)
         .map(|d| 1.0 / d)
         .collect();
-    let mut r = vec![0.0; n];
+    let mut r = vec![[0.0; M]; n];
     a.multiply(x, &mut r);
     r.par_iter_mut()
         .with_min_len(MIN_PARALLEL_LEN)
         .zip(b)
-        .for_each(|(r, b)| *r = b - *r);
-    let mut z: Vec<f64> = r
+        .for_each(|(r, b)| {
+            for m in 0..M {
+                r[m] = b[m] - r[m];
+            }
+        });
+    let mut z: Vec<[f64; M]> = r
         .par_iter()
         .with_min_len(MIN_PARALLEL_LEN)
         .zip(&inv_diag)
-        .map(|(r, m)| r * m)
+        .map(|(r, d)| std::array::from_fn(|m| r[m] * d))
         .collect();
     let mut p = z.clone();
-    let mut ap = vec![0.0; n];
-    let mut rz = dot(&r, &z);
-    let mut r_norm = dot(&r, &r).sqrt();
-    let mut iterations = 0;
-    while iterations < max_iterations {
-        if r_norm <= tolerance * b_norm {
+    let mut ap = vec![[0.0; M]; n];
+    let mut rz: [f64; M] = std::array::from_fn(|m| dot_m(&r, &z, m));
+    let mut r_norm: [f64; M] = std::array::from_fn(|m| dot_m(&r, &r, m).sqrt());
+    let mut alpha = [0.0; M];
+    loop {
+        for m in 0..M {
+            if running[m]
+                && (reports[m].iterations >= max_iterations || r_norm[m] <= tolerance * b_norm[m])
+            {
+                running[m] = false;
+            }
+        }
+        if !running.iter().any(|&r| r) {
             break;
         }
         a.multiply(&p, &mut ap);
-        let p_ap = dot(&p, &ap);
-        if p_ap.is_nan() || p_ap <= 0.0 {
-            break; // not positive definite (or NaN): report as not converged
+        for m in 0..M {
+            if running[m] {
+                let p_ap = dot_m(&p, &ap, m);
+                if p_ap.is_nan() || p_ap <= 0.0 {
+                    // Not positive definite (or NaN): reported as not converged.
+                    running[m] = false;
+                    continue;
+                }
+                alpha[m] = rz[m] / p_ap;
+            }
         }
-        let alpha = rz / p_ap;
         x.par_iter_mut()
             .with_min_len(MIN_PARALLEL_LEN)
-            .zip(&p)
-            .for_each(|(x, p)| *x += alpha * p);
-        r.par_iter_mut()
-            .with_min_len(MIN_PARALLEL_LEN)
-            .zip(&ap)
-            .for_each(|(r, ap)| *r -= alpha * ap);
-        z.par_iter_mut()
-            .with_min_len(MIN_PARALLEL_LEN)
-            .zip(r.par_iter().with_min_len(MIN_PARALLEL_LEN).zip(&inv_diag))
-            .for_each(|(z, (r, m))| *z = r * m);
-        let rz_new = dot(&r, &z);
-        let beta = rz_new / rz;
-        rz = rz_new;
+            .zip(r.par_iter_mut().zip(z.par_iter_mut()))
+            .zip(p.par_iter().zip(ap.par_iter()).zip(&inv_diag))
+            .for_each(|((x, (r, z)), ((p, ap), d))| {
+                for m in 0..M {
+                    if running[m] {
+                        x[m] += alpha[m] * p[m];
+                        r[m] -= alpha[m] * ap[m];
+                        z[m] = r[m] * d;
+                    }
+                }
+            });
+        let mut beta = [0.0; M];
+        for m in 0..M {
+            if running[m] {
+                let rz_new = dot_m(&r, &z, m);
+                beta[m] = rz_new / rz[m];
+                rz[m] = rz_new;
+            }
+        }
         p.par_iter_mut()
             .with_min_len(MIN_PARALLEL_LEN)
             .zip(&z)
-            .for_each(|(p, z)| *p = z + beta * *p);
-        r_norm = sum_by(n, |i| r[i] * r[i]).sqrt();
-        iterations += 1;
+            .for_each(|(p, z)| {
+                for m in 0..M {
+                    if running[m] {
+                        p[m] = z[m] + beta[m] * p[m];
+                    }
+                }
+            });
+        for m in 0..M {
+            if running[m] {
+                r_norm[m] = dot_m(&r, &r, m).sqrt();
+                reports[m].iterations += 1;
+            }
+        }
     }
-    let relative_residual = r_norm / b_norm;
-    SolveReport {
-        iterations,
-        relative_residual,
-        converged: relative_residual <= tolerance,
+    for m in 0..M {
+        if b_norm[m] != 0.0 && n > 0 {
+            let relative_residual = r_norm[m] / b_norm[m];
+            reports[m].relative_residual = relative_residual;
+            reports[m].converged = relative_residual <= tolerance;
+        }
     }
+    reports
 }

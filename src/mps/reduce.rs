@@ -12,8 +12,11 @@ pub const CHUNK: usize = 1024;
 /// of handing work to threads exceeds the work. (Only scheduling: results never depend on it.)
 pub const MIN_PARALLEL_LEN: usize = 4096;
 
-/// Smallest number of particles handed to one task by the per-particle loops (each particle
-/// gathers over tens of neighbours, so tasks can be smaller than for plain vector loops).
+/// Number of particles handed to one task by the per-particle loops (each particle gathers
+/// over tens of neighbours, so tasks can be smaller than for plain vector loops). Also the
+/// largest task: the work per particle is very uneven (fluid particles first, then walls
+/// with little or nothing to do), and rayon's adaptive split would leave one thread with
+/// most of it.
 pub const PARTICLES_PER_TASK: usize = 256;
 
 /// Sum of f(i) for i in 0..n, bitwise identical on any thread count.

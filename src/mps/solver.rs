@@ -1,9 +1,9 @@
 //! One time step of the MPS method (DESIGN.md section 3), stage by stage.
-use super::grid::Neighbours;
+use super::grid::{KernelPairs, Neighbours};
 use super::kernel::{RefValues, weight};
 use super::operators::{gradient, number_density};
 use super::particles::{ParticleKind, Particles, Vector};
-use super::pressure::{CsrMatrix, Row, SolveReport, solve_pcg};
+use super::pressure::{CsrMatrix, SolveReport, solve_pcg};
 use super::reduce::PARTICLES_PER_TASK;
 use super::reduce::max_by;
 use super::rheology::Rheology;
@@ -113,7 +113,14 @@ pub fn wall_collision_distance_m(
 /// never part of the state or of any recording).
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct StageTimes {
+    /// Cell-grid (Verlet) list builds and their count.
     pub neighbours_s: f64,
+    pub list_builds: u64,
+    /// Filtering the lists to the kernel radii (twice per step).
+    pub kernel_pairs_s: f64,
+    /// CG iterations summed over steps (viscosity: over the velocity components).
+    pub ppe_iterations: u64,
+    pub viscosity_iterations: u64,
     pub viscosity_s: f64,
     pub pressure_assembly_s: f64,
     pub pressure_solve_s: f64,
@@ -173,6 +180,8 @@ pub struct Solver<const D: usize> {
     /// the first step). Derived data for output, not part of the state.
     pub strain_invariant: Vec<f64>,
     neighbours: Neighbours,
+    /// Pairs of `neighbours` within the kernel radii at the current positions.
+    pairs: KernelPairs,
     /// Positions when the neighbour lists were built (Verlet lists with a skin).
     listed_at_m: Vec<Vector<D>>,
     /// Rebuild the lists at every stage (slower; for checking that reuse changes no bit).
@@ -199,6 +208,7 @@ impl<const D: usize> Solver<D> {
             step: 0,
             strain_invariant: Vec::new(),
             neighbours: Neighbours::default(),
+            pairs: KernelPairs::default(),
             listed_at_m: Vec::new(),
             fresh_lists: false,
             timing: StageTimes::default(),
@@ -270,6 +280,7 @@ impl<const D: usize> Solver<D> {
             }
         }
         self.rebuild_neighbours();
+        self.refresh_pairs();
         let start_density = match self.config.source_term {
             SourceTerm::Mixed => Some(self.number_density()),
             SourceTerm::NumberDensity => None,
@@ -277,13 +288,14 @@ impl<const D: usize> Solver<D> {
         let viscosity_started = Instant::now();
         let stage = predict_velocity(
             &self.particles,
-            &self.neighbours,
+            &self.pairs,
             &self.refs,
             &self.viscous_settings(),
             self.gravity(),
             dt_s,
         );
         self.timing.viscosity_s += viscosity_started.elapsed().as_secs_f64();
+        self.timing.viscosity_iterations += u64::from(stage.solve.iterations);
         if !stage.solve.converged {
             return Err(StepError::ViscosityNotConverged {
                 residual: stage.solve.relative_residual,
@@ -312,6 +324,7 @@ impl<const D: usize> Solver<D> {
         // Neighbours at the predicted positions, used by every later stage of the step.
         self.rebuild_neighbours();
         self.collide(dt_s, false);
+        self.refresh_pairs();
 
         // (3) Number density n*, free surface, pressure Poisson equation.
         let pressure_started = Instant::now();
@@ -325,6 +338,7 @@ impl<const D: usize> Solver<D> {
             .count();
         let (ppe, solve_s) = self.solve_pressure(dt_s, &source, &surface);
         self.timing.pressure_solve_s += solve_s;
+        self.timing.ppe_iterations += u64::from(ppe.iterations);
         self.timing.pressure_assembly_s += pressure_started.elapsed().as_secs_f64() - solve_s;
         if !ppe.converged {
             return Err(StepError::PressureNotConverged {
@@ -390,6 +404,26 @@ impl<const D: usize> Solver<D> {
         self.timing.neighbours_s += started.elapsed().as_secs_f64();
     }
 
+    /// The kernel-radius pairs at the current positions (after every move of the particles
+    /// that later stages see). A wall particle with no fluid particle within the Laplacian
+    /// radius gets none: its number density is then 0, so it is a free-surface particle with
+    /// p = 0 and no PPE row. Only a wall that is near fluid carries pressure (away from the
+    /// fluid a wall's pressure has no meaning; in wall corners it would be a spurious
+    /// pressure from the walls' own number density).
+    fn refresh_pairs(&mut self) {
+        let started = Instant::now();
+        let r = &self.refs;
+        let kind = &self.particles.kind;
+        self.pairs = KernelPairs::near_fluid(
+            &self.neighbours,
+            &self.particles.position_m,
+            r.radius_n_m,
+            r.radius_lap_m,
+            |i| kind[i] == ParticleKind::Fluid,
+        );
+        self.timing.kernel_pairs_s += started.elapsed().as_secs_f64();
+    }
+
     fn refresh_lists(&mut self) {
         let skin = LIST_SKIN * self.config.spacing_m;
         let p = &self.particles;
@@ -405,11 +439,21 @@ impl<const D: usize> Solver<D> {
             return;
         }
         let kind = &p.kind;
-        self.neighbours =
-            Neighbours::build_active(&p.position_m, self.config.radius_lap_m + skin, |i| {
-                kind[i].is_active()
-            });
+        // Operators are evaluated at fluid particles and at wall particles with fluid within
+        // reach (see `refresh_pairs`): only they get lists. Dummy layers and walls away from
+        // the fluid only fill the support of others.
+        let cutoff_m = self.config.radius_lap_m + skin;
+        let active = |i: usize| kind[i].is_active();
+        let fluid = Neighbours::build_centres(&p.position_m, cutoff_m, active, |i| {
+            kind[i] == ParticleKind::Fluid
+        });
+        let touched = fluid.listed(p.len());
+        let walls = Neighbours::build_centres(&p.position_m, cutoff_m, active, |i| {
+            touched[i] && kind[i] == ParticleKind::Wall
+        });
+        self.neighbours = fluid.merged(&walls);
         self.listed_at_m = p.position_m.clone();
+        self.timing.list_builds += 1;
     }
 
     /// (5) Collision model: fluid pairs closer than the collision distance that approach each
@@ -429,6 +473,7 @@ impl<const D: usize> Solver<D> {
         let dv: Vec<Vector<D>> = (0..p.len())
             .into_par_iter()
             .with_min_len(PARTICLES_PER_TASK)
+            .with_max_len(PARTICLES_PER_TASK)
             .map(|i| {
                 let mut dv = Vector::<D>::zeros();
                 if p.kind[i] != ParticleKind::Fluid {
@@ -469,11 +514,12 @@ impl<const D: usize> Solver<D> {
     /// included: they fill the wall's support).
     fn number_density(&self) -> Vec<f64> {
         let p = &self.particles;
-        let nb = &self.neighbours;
+        let nb = &self.pairs.near;
         let re = self.refs.radius_n_m;
         (0..p.len())
             .into_par_iter()
             .with_min_len(PARTICLES_PER_TASK)
+            .with_max_len(PARTICLES_PER_TASK)
             .map(|i| number_density(&p.position_m, nb, i, re, |_| true))
             .collect()
     }
@@ -483,7 +529,7 @@ impl<const D: usize> Solver<D> {
     fn pressure_source(&self, dt_s: f64, density: &[f64]) -> Vec<f64> {
         let c = &self.config;
         let p = &self.particles;
-        let nb = &self.neighbours;
+        let nb = &self.pairs.near;
         let refs = self.refs;
         let rho = c.density_kg_m3;
         let density_scale = c.relaxation_coefficient * rho / (dt_s * dt_s);
@@ -491,6 +537,7 @@ impl<const D: usize> Solver<D> {
         (0..p.len())
             .into_par_iter()
             .with_min_len(PARTICLES_PER_TASK)
+            .with_max_len(PARTICLES_PER_TASK)
             .map(|i| {
                 let mut b = density_scale * (density[i] - refs.n0) / refs.n0;
                 if mixed && p.kind[i].has_pressure() {
@@ -524,7 +571,7 @@ impl<const D: usize> Solver<D> {
     ) -> (SolveReport, f64) {
         let c = &self.config;
         let p = &self.particles;
-        let nb = &self.neighbours;
+        let nb = &self.pairs.lap;
         let refs = self.refs;
         let rho = c.density_kg_m3;
         let unknown_of: Vec<u32> = {
@@ -545,37 +592,30 @@ impl<const D: usize> Solver<D> {
             .collect();
         let coef = 2.0 * D as f64 / (refs.lambda_m2 * refs.n0_lap);
         let diag_extra = rho * c.compressibility_1_pa / (dt_s * dt_s);
-        let assembled: Vec<Row> = rows
-            .par_iter()
-            .with_min_len(PARTICLES_PER_TASK)
-            .map(|&i| {
-                let mut diag = diag_extra;
-                let mut entries = Vec::new();
-                for &j in nb.of(i) {
-                    let j = j as usize;
-                    if !p.kind[j].has_pressure() {
-                        continue;
-                    }
-                    let a = coef
-                        * weight(
-                            nb.displacement(&p.position_m, i, j).norm(),
-                            refs.radius_lap_m,
-                        );
-                    if a == 0.0 {
-                        continue;
-                    }
-                    diag += a;
-                    if unknown_of[j] != u32::MAX {
-                        entries.push((unknown_of[j], -a));
-                    }
+        let (matrix, _) = CsrMatrix::assemble(rows.len(), |k, columns, values| {
+            let i = rows[k];
+            let mut diag = diag_extra;
+            for &j in nb.of(i) {
+                let j = j as usize;
+                if !p.kind[j].has_pressure() {
+                    continue;
                 }
-                Row {
-                    diagonal: diag,
-                    entries,
+                let a = coef
+                    * weight(
+                        nb.displacement(&p.position_m, i, j).norm(),
+                        refs.radius_lap_m,
+                    );
+                if a == 0.0 {
+                    continue;
                 }
-            })
-            .collect();
-        let matrix = CsrMatrix::from_rows(&assembled);
+                diag += a;
+                if unknown_of[j] != u32::MAX {
+                    columns.push(unknown_of[j]);
+                    values.push(-a);
+                }
+            }
+            (diag, ())
+        });
         let rhs: Vec<f64> = rows.iter().map(|&i| source[i]).collect();
         // Warm start from the previous pressure (part of the recorded state, so replays and
         // resumed runs start the solver from the same guess).
@@ -601,12 +641,13 @@ impl<const D: usize> Solver<D> {
     /// p_j - min_k p_k over i and its neighbours (keeps the pair force repulsive).
     fn correct_with_pressure_gradient(&mut self, dt_s: f64) {
         let p = &self.particles;
-        let nb = &self.neighbours;
+        let nb = &self.pairs.near;
         let refs = self.refs;
         let scale = -dt_s / self.config.density_kg_m3;
         let dv: Vec<Vector<D>> = (0..p.len())
             .into_par_iter()
             .with_min_len(PARTICLES_PER_TASK)
+            .with_max_len(PARTICLES_PER_TASK)
             .map(|i| {
                 if p.kind[i] != ParticleKind::Fluid {
                     return Vector::<D>::zeros();

@@ -1,9 +1,9 @@
 //! Viscous stage of the step: strain rate, effective viscosity, the optional stress-gradient
 //! term of seed 000 eq. 8, and the implicit viscous predictor solved by CG.
-use super::grid::Neighbours;
+use super::grid::{KernelPairs, Neighbours};
 use super::kernel::{RefValues, weight};
 use super::particles::{ParticleKind, Particles, Vector};
-use super::pressure::{CsrMatrix, Row, SolveReport, solve_pcg};
+use super::pressure::{CsrMatrix, SolveReport, solve_pcg_many};
 use super::reduce::PARTICLES_PER_TASK;
 use super::rheology::Rheology;
 use nalgebra::SMatrix;
@@ -76,7 +76,7 @@ pub fn strain_invariant<const D: usize>(g: &SMatrix<f64, D, D>) -> f64 {
 /// a_ij = 2d/(lambda n0) w_ij; wall and dummy velocities are known and go to the right side.
 pub fn predict_velocity<const D: usize>(
     p: &Particles<D>,
-    nb: &Neighbours,
+    pairs: &KernelPairs,
     refs: &RefValues,
     settings: &ViscousSettings,
     body_force_m_s2: Vector<D>,
@@ -88,9 +88,10 @@ pub fn predict_velocity<const D: usize>(
     let strain: Vec<f64> = (0..n)
         .into_par_iter()
         .with_min_len(PARTICLES_PER_TASK)
+        .with_max_len(PARTICLES_PER_TASK)
         .map(|i| {
             if is_fluid(i) {
-                strain_invariant(&velocity_gradient(p, nb, refs, i))
+                strain_invariant(&velocity_gradient(p, &pairs.near, refs, i))
             } else {
                 0.0
             }
@@ -130,73 +131,74 @@ pub fn predict_velocity<const D: usize>(
     }
     let coef = 2.0 * D as f64 / (refs.lambda_m2 * refs.n0_lap);
     // Row i: (s_i + sum_j c_ij) u_i - sum_fluid c_ij u_j = s_i rhs_i + sum_walls c_ij u_j.
-    let assembled: Vec<(Row, f64, Vector<D>)> = rows
-        .par_iter()
-        .with_min_len(PARTICLES_PER_TASK)
-        .map(|&i| {
-            let scale = if divergence_form {
-                1.0
-            } else {
-                rho / (dt_s * mu[i])
-            };
-            let mut diag = scale;
-            let mut boundary = Vector::<D>::zeros();
-            let mut entries = Vec::new();
-            for &j in nb.of(i) {
-                let j = j as usize;
-                let a = coef
-                    * weight(
-                        nb.displacement(&p.position_m, i, j).norm(),
-                        refs.radius_lap_m,
-                    );
-                if a == 0.0 {
-                    continue;
-                }
-                let c = if divergence_form {
-                    let mu_ij = if is_fluid(j) {
-                        harmonic_mean(mu[i], mu[j])
-                    } else {
-                        mu[i]
-                    };
-                    a * mu_ij * dt_s / rho
-                } else {
-                    a
-                };
-                diag += c;
-                if row_of[j] != u32::MAX {
-                    entries.push((row_of[j], -c));
-                } else {
-                    boundary += p.velocity_m_s[j] * c;
-                }
+    let nb = &pairs.lap;
+    let (matrix, extra) = CsrMatrix::assemble(rows.len(), |k, columns, values| {
+        let i = rows[k];
+        let scale = if divergence_form {
+            1.0
+        } else {
+            rho / (dt_s * mu[i])
+        };
+        let mut diag = scale;
+        let mut boundary = Vector::<D>::zeros();
+        for &j in nb.of(i) {
+            let j = j as usize;
+            let a = coef
+                * weight(
+                    nb.displacement(&p.position_m, i, j).norm(),
+                    refs.radius_lap_m,
+                );
+            if a == 0.0 {
+                continue;
             }
-            let row = Row {
-                diagonal: diag,
-                entries,
+            let c = if divergence_form {
+                let mu_ij = if is_fluid(j) {
+                    harmonic_mean(mu[i], mu[j])
+                } else {
+                    mu[i]
+                };
+                a * mu_ij * dt_s / rho
+            } else {
+                a
             };
-            (row, scale, boundary)
+            diag += c;
+            if row_of[j] != u32::MAX {
+                columns.push(row_of[j]);
+                values.push(-c);
+            } else {
+                boundary += p.velocity_m_s[j] * c;
+            }
+        }
+        (diag, (scale, boundary))
+    });
+    // All velocity components in one run of side-by-side solves (one matrix pass per product).
+    let b: Vec<[f64; D]> = rows
+        .iter()
+        .zip(&extra)
+        .map(|(&i, (scale, boundary))| {
+            std::array::from_fn(|axis| rhs[i][axis] * scale + boundary[axis])
         })
         .collect();
-    let matrix = CsrMatrix::from_rows(assembled.iter().map(|(row, _, _)| row));
-    for axis in 0..D {
-        let b: Vec<f64> = rows
-            .iter()
-            .zip(&assembled)
-            .map(|(&i, (_, scale, boundary))| rhs[i][axis] * scale + boundary[axis])
-            .collect();
-        // Start from the current velocity: close to the answer, and part of the state.
-        let mut x: Vec<f64> = rows.iter().map(|&i| p.velocity_m_s[i][axis]).collect();
-        let report = solve_pcg(
-            &matrix,
-            &b,
-            &mut x,
-            settings.tolerance,
-            settings.max_iterations,
-        );
+    // Start from the current velocity: close to the answer, and part of the state.
+    let mut x: Vec<[f64; D]> = rows
+        .iter()
+        .map(|&i| std::array::from_fn(|axis| p.velocity_m_s[i][axis]))
+        .collect();
+    let reports = solve_pcg_many(
+        &matrix,
+        &b,
+        &mut x,
+        settings.tolerance,
+        settings.max_iterations,
+    );
+    for report in reports {
         solve.iterations += report.iterations;
         solve.relative_residual = solve.relative_residual.max(report.relative_residual);
         solve.converged &= report.converged;
-        for (k, &i) in rows.iter().enumerate() {
-            velocity[i][axis] = x[k];
+    }
+    for (k, &i) in rows.iter().enumerate() {
+        for axis in 0..D {
+            velocity[i][axis] = x[k][axis];
         }
     }
     ViscousStage {
