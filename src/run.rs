@@ -311,6 +311,36 @@ pub fn experiment_metrics<const D: usize>(
     out
 }
 
+/// Names of the metrics that [`experiment_metrics`] gives for this manifest (without a
+/// scene to measure).
+pub fn metric_names(m: &Manifest) -> Vec<String> {
+    let mut names = vec!["front_position_m".to_string()];
+    if l_flow_spec(&m.scene).is_some() {
+        names.push("l_flow_value_m".into());
+    }
+    if slump_spec(&m.scene).is_some() {
+        for name in [
+            "spread_radius_mean_m",
+            "spread_radius_min_m",
+            "spread_radius_max_m",
+            "spread_diameter_m",
+            "centre_height_m",
+        ] {
+            names.push(name.into());
+        }
+        if yield_stress_pa(&m.fluid) > 0.0 {
+            names.push("fluid_on_plate_count".into());
+            names.push("closed_form_radius_m".into());
+            for r in ["r25", "r50", "r75"] {
+                names.push(format!("surface_height_{r}_m"));
+                names.push(format!("closed_form_height_{r}_m"));
+            }
+        }
+    }
+    names.sort();
+    names
+}
+
 /// Slump-flow metrics (README, *Experiment manifests*): spread radius over the octants, the
 /// height at the centre, and the Roussel & Coussot closed forms for the fluid's volume.
 fn slump_metrics<const D: usize>(
@@ -606,6 +636,13 @@ pub fn time_loop<const D: usize>(
     let mut report = None;
     let mut dt_s = solver.next_dt_s(end_s);
     let frames = sink.wants_frames();
+    // The rest metric at the previous checkpoint. A restored run starts at a checkpoint, so
+    // its value is that of the restored state: replays and resumed runs stop where the run
+    // did.
+    let mut rest_previous: Option<f64> = match &m.stop.rest_metric {
+        Some(name) if start.restored => Some(experiment_metrics(m, &solver.particles)[name]),
+        _ => None,
+    };
 
     loop {
         let t = solver.time_s;
@@ -620,6 +657,21 @@ pub fn time_loop<const D: usize>(
             checkpoints.push(checkpoint::hash_entry(&msg));
             sink.checkpoint(time_ns(t), &msg)?;
             last_checkpoint_step = Some(solver.step);
+            if let Some(name) = &m.stop.rest_metric {
+                let value = experiment_metrics(m, &solver.particles)[name];
+                let change = rest_previous.map(|previous| (value - previous).abs());
+                rest_previous = Some(value);
+                if let Some(change) = change
+                    && t >= m.stop.rest_after_s
+                    && change < m.stop.rest_metric_change
+                {
+                    stop_reason = format!(
+                        "settled: {name} changed by {change:.3e} over the last checkpoint interval (stop.rest_metric_change = {})",
+                        m.stop.rest_metric_change
+                    );
+                    break;
+                }
+            }
         }
         if control.progress && progress_schedule.due(t) {
             eprintln!(

@@ -2,6 +2,8 @@
 
 use std::path::Path;
 
+mod common;
+
 use mps_runner::manifest::{self, Fluid, ManifestError, Resolved, Scene};
 
 /// A manifest with every field written out (values as in experiments/dam_break_2d.yaml).
@@ -834,4 +836,53 @@ fn variant_can_be_selected_by_override() {
     // an unknown variant is an error naming the valid ones
     let e = err_with(MINIMAL, &["scene.kind=lb_box", "scene.gate_height_m=0.1"]);
     assert_override(&e, "scene.kind", &["lb_box", "dam_break"]);
+}
+
+#[test]
+fn rest_metric_must_be_a_metric_of_the_experiment() {
+    let e = err_with(MINIMAL, &["stop.rest_metric=spread_radius_mean_m"]);
+    assert_invalid(
+        &e,
+        "stop.rest_metric",
+        None,
+        &["spread_radius_mean_m", "not a metric", "front_position_m"],
+    );
+    let r = ok_with(MINIMAL, &["stop.rest_metric=front_position_m"]);
+    assert_eq!(
+        r.manifest.stop.rest_metric.as_deref(),
+        Some("front_position_m")
+    );
+    let e = err_with(MINIMAL, &["stop.rest_metric_change=0"]);
+    assert_invalid(&e, "stop.rest_metric_change", None, &["0"]);
+}
+
+#[test]
+fn metric_names_are_the_metrics_each_experiment_reports() {
+    // The names validation accepts for stop.rest_metric are exactly the keys measured.
+    for entry in std::fs::read_dir(common::root().join("experiments")).unwrap() {
+        let path = entry.unwrap().path();
+        let Ok(mps_runner::manifest::sweep::Plan::Single(r)) =
+            mps_runner::manifest::sweep::load_plan(&path, &[])
+        else {
+            continue;
+        };
+        let m = &r.manifest;
+        let measured: Vec<String> = if m.dimension == 2 {
+            let scene = mps_runner::run::build_scene::<2>(m);
+            mps_runner::run::experiment_metrics(m, &scene.particles)
+                .into_keys()
+                .collect()
+        } else {
+            let scene = mps_runner::run::build_scene::<3>(m);
+            mps_runner::run::experiment_metrics(m, &scene.particles)
+                .into_keys()
+                .collect()
+        };
+        assert_eq!(
+            mps_runner::run::metric_names(m),
+            measured,
+            "{}",
+            path.display()
+        );
+    }
 }

@@ -394,3 +394,58 @@ fn a_run_ended_by_its_stop_condition_verifies() {
     let (code, text) = verify_cli(&result.path);
     assert_eq!(code, 0, "{text}");
 }
+
+#[test]
+fn a_run_stopped_as_settled_verifies_from_the_start_and_from_a_checkpoint() {
+    // The rest rule compares a metric with its value at the previous checkpoint; a replay
+    // from checkpoint K takes that value from the restored state, so it must stop at the same
+    // checkpoint. The tolerance (5 cm per 10 ms) is loose enough to stop at the first check.
+    let dir = tempfile::tempdir().unwrap();
+    let settings = [
+        "spacing_m=0.025",
+        "time.end_s=0.5",
+        "output.checkpoint_interval_s=0.01",
+        "stop.rest_metric=front_position_m",
+        "stop.rest_after_s=0.03",
+    ];
+    let loose: Vec<&str> = settings
+        .iter()
+        .copied()
+        .chain(["stop.rest_metric_change=0.05"])
+        .collect();
+    let resolved = common::resolve("l_flow_2d.yaml", &loose);
+    let result = common::run_in(&resolved, dir.path(), 2);
+    assert_eq!(result.outcome, Outcome::Completed);
+    assert!(
+        result.stop_reason.contains("settled"),
+        "{}",
+        result.stop_reason
+    );
+    let stop = result.summary.metrics["stop_time_s"];
+    // Checkpoints fall on the first step at or after each multiple of the interval (dt 1e-4 s).
+    assert!((0.03..0.0302).contains(&stop), "stopped at {stop} s");
+    assert_eq!(result.summary.checkpoints.len(), 4);
+    let (code, text) = verify_cli(&result.path);
+    assert_eq!(code, 0, "{text}");
+    let out = runner()
+        .args(["verify", "-q", "--from", "2"])
+        .arg(&result.path)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+
+    // A tolerance the moving front never meets: the run goes on to its end time.
+    let strict: Vec<&str> = settings
+        .iter()
+        .copied()
+        .chain(["stop.rest_metric_change=1e-9", "time.end_s=0.06"])
+        .collect();
+    let dir = tempfile::tempdir().unwrap();
+    let result = common::run_in(&common::resolve("l_flow_2d.yaml", &strict), dir.path(), 2);
+    assert!(result.stop_reason.is_empty(), "{}", result.stop_reason);
+    assert!((result.summary.metrics["stop_time_s"] - 0.06).abs() < 1e-9);
+}

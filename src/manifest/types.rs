@@ -455,6 +455,23 @@ pub struct Stop {
     /// hence non-flowing, before the flow starts).
     #[serde(default = "default_non_flowing_after_s")]
     pub non_flowing_after_s: f64,
+    /// Stop when the flow has settled: at a checkpoint, this summary metric (e.g.
+    /// `spread_radius_mean_m`) has changed by less than `rest_metric_change` since the previous
+    /// checkpoint. Checked from `rest_after_s` on. null = off.
+    #[serde(default)]
+    pub rest_metric: Option<String>,
+    /// The change below which the flow counts as settled, in the metric's unit (m for
+    /// lengths), over one `output.checkpoint_interval_s`.
+    #[serde(default = "default_rest_metric_change")]
+    pub rest_metric_change: f64,
+    /// Simulated time from which `rest_metric` is checked (for the slump test: after the cone
+    /// has been lifted).
+    #[serde(default = "default_non_flowing_after_s")]
+    pub rest_after_s: f64,
+}
+
+fn default_rest_metric_change() -> f64 {
+    1e-3
 }
 
 fn default_non_flowing_after_s() -> f64 {
@@ -468,6 +485,9 @@ impl Default for Stop {
             max_speed_m_s: default_max_speed_m_s(),
             non_flowing_fraction: None,
             non_flowing_after_s: default_non_flowing_after_s(),
+            rest_metric: None,
+            rest_metric_change: default_rest_metric_change(),
+            rest_after_s: default_non_flowing_after_s(),
         }
     }
 }

@@ -504,6 +504,24 @@ pub fn check(m: &Manifest) -> Vec<Issue> {
         m.stop.non_flowing_after_s,
         NON_NEGATIVE,
     );
+    c.real("stop.rest_after_s", m.stop.rest_after_s, NON_NEGATIVE);
+    c.real(
+        "stop.rest_metric_change",
+        m.stop.rest_metric_change,
+        POSITIVE,
+    );
+    if let Some(name) = &m.stop.rest_metric {
+        let names = crate::run::metric_names(m);
+        if !names.contains(name) {
+            c.fail(
+                "stop.rest_metric",
+                format!(
+                    "`{name}` is not a metric of this experiment (it has: {})",
+                    names.join(", ")
+                ),
+            );
+        }
+    }
     if let Some(share) = m.stop.non_flowing_fraction
         && c.real(
             "stop.non_flowing_fraction",
