@@ -886,3 +886,29 @@ fn metric_names_are_the_metrics_each_experiment_reports() {
         );
     }
 }
+
+#[test]
+fn experiment_hashes_stay_what_they_were() {
+    // `runner verify` re-canonicalises a file's stored manifest and checks its hash: a change
+    // of the canonical form (a new key written for every manifest) would make every file
+    // written before it unverifiable. smoke_2d's hash as of the first release of the format.
+    let r = manifest::load(&common::experiment("smoke_2d.yaml"), &[]).unwrap();
+    assert_eq!(
+        r.hash_hex,
+        "e549f3f34509373b7baaa9c1ed88d53c111b9c220bbecc9e585706f7f4de0a13"
+    );
+    assert!(!r.canonical.contains("rest_"), "{}", r.canonical);
+    // With a rest metric the rest settings are part of the experiment.
+    let sets = ["stop.rest_metric=front_position_m".to_string()];
+    let r = manifest::load(&common::experiment("smoke_2d.yaml"), &sets).unwrap();
+    assert!(
+        r.canonical.contains("\"rest_after_s\":0.5"),
+        "{}",
+        r.canonical
+    );
+    assert!(
+        r.canonical.contains("\"rest_metric_change\":0.001"),
+        "{}",
+        r.canonical
+    );
+}

@@ -1,6 +1,6 @@
 //! Sparse symmetric systems of the step (PPE and implicit viscosity): assembly in CSR and a
 //! Jacobi-preconditioned conjugate gradient.
-use super::reduce::{MIN_PARALLEL_LEN, PARTICLES_PER_TASK, sum_by};
+use super::reduce::{CHUNK, MIN_PARALLEL_LEN, PARTICLES_PER_TASK, sum_by};
 use rayon::prelude::*;
 
 /// Symmetric sparse matrix in compressed rows (diagonal stored separately).
@@ -69,21 +69,25 @@ impl CsrMatrix {
         y.par_iter_mut()
             .with_min_len(MIN_PARALLEL_LEN)
             .enumerate()
-            .for_each(|(i, yi)| {
-                let range = self.row_offsets[i]..self.row_offsets[i + 1];
-                let mut s = [0.0; M];
-                for m in 0..M {
-                    s[m] = self.diagonal[i] * x[i][m];
-                }
-                // Zipped slices: no bounds check per entry but the column lookup.
-                for (&c, &v) in self.columns[range.clone()].iter().zip(&self.values[range]) {
-                    let xc = &x[c as usize];
-                    for m in 0..M {
-                        s[m] += v * xc[m];
-                    }
-                }
-                *yi = s;
-            });
+            .for_each(|(i, yi)| *yi = self.row_product(i, x));
+    }
+
+    /// Row i of A x, for M vectors.
+    #[inline]
+    fn row_product<const M: usize>(&self, i: usize, x: &[[f64; M]]) -> [f64; M] {
+        let range = self.row_offsets[i]..self.row_offsets[i + 1];
+        let mut s = [0.0; M];
+        for m in 0..M {
+            s[m] = self.diagonal[i] * x[i][m];
+        }
+        // Zipped slices: no bounds check per entry but the column lookup.
+        for (&c, &v) in self.columns[range.clone()].iter().zip(&self.values[range]) {
+            let xc = &x[c as usize];
+            for m in 0..M {
+                s[m] += v * xc[m];
+            }
+        }
+        s
     }
 }
 
@@ -119,6 +123,11 @@ pub fn solve_pcg(
 /// viscous stage), run side by side so that each matrix product serves all of them. Every
 /// component goes through exactly the operations of its own [`solve_pcg`] and stops at its
 /// own convergence: the bits do not depend on M.
+///
+/// Each iteration makes three parallel passes over fixed chunks of [`CHUNK`] rows: the
+/// product A p with p . Ap, the updates of x, r and z with r . z and r . r, and the new p.
+/// The dot products are summed within each chunk in row order and then over the chunks in
+/// order, exactly as [`sum_by`] does (DESIGN.md 6).
 pub fn solve_pcg_many<const M: usize>(
     a: &CsrMatrix,
     b: &[[f64; M]],
@@ -182,37 +191,64 @@ pub fn solve_pcg_many<const M: usize>(
         if !running.iter().any(|&r| r) {
             break;
         }
-        a.multiply(&p, &mut ap);
+        // A p and p . Ap.
+        let p_ap: Vec<[f64; M]> = ap
+            .par_chunks_mut(CHUNK)
+            .enumerate()
+            .map(|(c, ap)| {
+                let mut s = [0.0; M];
+                for (k, ap) in ap.iter_mut().enumerate() {
+                    let i = c * CHUNK + k;
+                    *ap = a.row_product(i, &p);
+                    for m in 0..M {
+                        s[m] += p[i][m] * ap[m];
+                    }
+                }
+                s
+            })
+            .collect();
+        let p_ap = in_order(&p_ap);
         for m in 0..M {
             if running[m] {
-                let p_ap = dot_m(&p, &ap, m);
-                if p_ap.is_nan() || p_ap <= 0.0 {
+                if p_ap[m].is_nan() || p_ap[m] <= 0.0 {
                     // Not positive definite (or NaN): reported as not converged.
                     running[m] = false;
                     continue;
                 }
-                alpha[m] = rz[m] / p_ap;
+                alpha[m] = rz[m] / p_ap[m];
             }
         }
-        x.par_iter_mut()
-            .with_min_len(MIN_PARALLEL_LEN)
-            .zip(r.par_iter_mut().zip(z.par_iter_mut()))
-            .zip(p.par_iter().zip(ap.par_iter()).zip(&inv_diag))
-            .for_each(|((x, (r, z)), ((p, ap), d))| {
-                for m in 0..M {
-                    if running[m] {
-                        x[m] += alpha[m] * p[m];
-                        r[m] -= alpha[m] * ap[m];
-                        z[m] = r[m] * d;
+        // x += alpha p, r -= alpha Ap, z = D^-1 r, with r . z and r . r.
+        let sums: Vec<([f64; M], [f64; M])> = x
+            .par_chunks_mut(CHUNK)
+            .zip(r.par_chunks_mut(CHUNK))
+            .zip(z.par_chunks_mut(CHUNK))
+            .enumerate()
+            .map(|(c, ((x, r), z))| {
+                let (mut rz, mut rr) = ([0.0; M], [0.0; M]);
+                for k in 0..x.len() {
+                    let i = c * CHUNK + k;
+                    for m in 0..M {
+                        if running[m] {
+                            x[k][m] += alpha[m] * p[i][m];
+                            r[k][m] -= alpha[m] * ap[i][m];
+                            z[k][m] = r[k][m] * inv_diag[i];
+                            rz[m] += r[k][m] * z[k][m];
+                            rr[m] += r[k][m] * r[k][m];
+                        }
                     }
                 }
-            });
+                (rz, rr)
+            })
+            .collect();
+        let rz_sums: Vec<[f64; M]> = sums.iter().map(|s| s.0).collect();
+        let rr_sums: Vec<[f64; M]> = sums.iter().map(|s| s.1).collect();
+        let (rz_new, rr) = (in_order(&rz_sums), in_order(&rr_sums));
         let mut beta = [0.0; M];
         for m in 0..M {
             if running[m] {
-                let rz_new = dot_m(&r, &z, m);
-                beta[m] = rz_new / rz[m];
-                rz[m] = rz_new;
+                beta[m] = rz_new[m] / rz[m];
+                rz[m] = rz_new[m];
             }
         }
         p.par_iter_mut()
@@ -227,7 +263,7 @@ pub fn solve_pcg_many<const M: usize>(
             });
         for m in 0..M {
             if running[m] {
-                r_norm[m] = dot_m(&r, &r, m).sqrt();
+                r_norm[m] = rr[m].sqrt();
                 reports[m].iterations += 1;
             }
         }
@@ -240,4 +276,15 @@ pub fn solve_pcg_many<const M: usize>(
         }
     }
     reports
+}
+
+/// Chunk partial sums added in chunk order (as [`sum_by`] combines them).
+fn in_order<const M: usize>(partials: &[[f64; M]]) -> [f64; M] {
+    let mut total = [0.0; M];
+    for s in partials {
+        for m in 0..M {
+            total[m] += s[m];
+        }
+    }
+    total
 }
