@@ -3,7 +3,9 @@
 //! `mps/` does one step of the method; this module owns the process around it (output
 //! schedule, diagnostics, checkpoints, stop conditions, outcome).
 use crate::checkpoint;
-use crate::manifest::{Fluid, Manifest, PpeSource, Resolved, Scene as SceneSpec};
+use crate::manifest::{
+    Fluid, Manifest, PpePreconditioner, PpeSource, Resolved, Scene as SceneSpec,
+};
 use crate::mps::{
     MovingWall, ParticleKind, Particles, Rheology, Solver, SolverConfig, SourceTerm, StageTimes,
 };
@@ -266,6 +268,7 @@ pub fn solver_config<const D: usize>(m: &Manifest, scene: &Scene<D>) -> SolverCo
         radius_lap_m: m.mps.laplacian_radius * l0,
         surface_threshold: m.mps.surface_threshold,
         relaxation_coefficient: m.mps.relaxation_coefficient,
+        multigrid_ppe: m.mps.ppe_preconditioner == PpePreconditioner::Multigrid,
         source_term: match m.mps.source_term {
             PpeSource::NumberDensity => SourceTerm::NumberDensity,
             PpeSource::Mixed => SourceTerm::Mixed,

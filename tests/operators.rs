@@ -2,8 +2,9 @@
 use mps_runner::mps::Vector;
 use mps_runner::mps::grid::Neighbours;
 use mps_runner::mps::kernel::{RefValues, weight};
+use mps_runner::mps::multigrid::Multigrid;
 use mps_runner::mps::operators::{gradient, laplacian, number_density};
-use mps_runner::mps::pressure::{CsrMatrix, solve_pcg, solve_pcg_many};
+use mps_runner::mps::pressure::{CsrMatrix, Preconditioner, solve_pcg, solve_pcg_many};
 
 /// Square/cubic lattice of side `side` cells with spacing l0; returns positions and the index
 /// of a particle in the middle.
@@ -196,7 +197,7 @@ fn side_by_side_solves_give_the_bits_of_single_solves() {
         .collect();
     let guess: Vec<[f64; 3]> = (0..n).map(|i| [0.0, 1.0, (i % 3) as f64]).collect();
     let mut together = guess.clone();
-    let reports = solve_pcg_many(&a, &b, &mut together, 1e-10, 10_000);
+    let reports = solve_pcg_many(&a, &b, &mut together, 1e-10, 10_000, Preconditioner::Jacobi);
     for axis in 0..3 {
         let b_axis: Vec<f64> = b.iter().map(|v| v[axis]).collect();
         let mut alone: Vec<f64> = guess.iter().map(|v| v[axis]).collect();
@@ -213,4 +214,66 @@ fn side_by_side_solves_give_the_bits_of_single_solves() {
     assert_eq!(reports[1].iterations, 0);
     assert!(reports[0].iterations > 10 && reports[2].iterations > 10);
     assert_ne!(reports[0].iterations, reports[2].iterations);
+}
+
+#[test]
+fn multigrid_preconditioner_cuts_iterations_and_keeps_bits_across_threads() {
+    // 5-point Poisson on a 100 x 100 grid: Jacobi-PCG needs O(m) iterations, the aggregation
+    // multigrid cycle a number nearly independent of m.
+    let m = 100;
+    let a = poisson(m);
+    let n = m * m;
+    let cells: Vec<[i64; 3]> = (0..n)
+        .map(|i| [(i % m) as i64, (i / m) as i64, 0])
+        .collect();
+    let x_true: Vec<f64> = (0..n)
+        .map(|i| ((i * 37 % 101) as f64 / 101.0) - 0.3)
+        .collect();
+    let b: Vec<[f64; 1]> = product(&a, &x_true).into_iter().map(|v| [v]).collect();
+    let tol = 1e-10;
+    let solve = |threads: usize, multigrid: bool| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| {
+            let mg = Multigrid::new(&a, &cells);
+            let pc = if multigrid {
+                Preconditioner::Multigrid(&mg)
+            } else {
+                Preconditioner::Jacobi
+            };
+            let mut x = vec![[0.0]; n];
+            let [report] = solve_pcg_many(&a, &b, &mut x, tol, 10_000, pc);
+            (report, x, mg.depth())
+        })
+    };
+    let (jacobi, _, _) = solve(2, false);
+    let (mg1, x1, depth) = solve(1, true);
+    let (mg2, x2, _) = solve(2, true);
+    assert!(jacobi.converged && mg1.converged, "{jacobi:?} {mg1:?}");
+    assert!(depth >= 4, "levels: {depth}");
+    assert!(
+        mg1.iterations * 5 < jacobi.iterations,
+        "multigrid {} vs Jacobi {} iterations",
+        mg1.iterations,
+        jacobi.iterations
+    );
+    assert_eq!(mg1, mg2);
+    assert!(
+        x1.iter()
+            .zip(&x2)
+            .all(|(p, q)| p[0].to_bits() == q[0].to_bits())
+    );
+    // The true residual meets the tolerance.
+    let x: Vec<f64> = x1.iter().map(|v| v[0]).collect();
+    let ax = product(&a, &x);
+    let r: f64 = ax
+        .iter()
+        .zip(&b)
+        .map(|(p, q)| (p - q[0]).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    let bn: f64 = b.iter().map(|v| v[0] * v[0]).sum::<f64>().sqrt();
+    assert!(r / bn < 10.0 * tol, "true residual {}", r / bn);
 }

@@ -25,7 +25,7 @@ use std::collections::BTreeSet;
 use std::path::Path;
 
 pub use error::{ManifestError, Result};
-pub use types::{Fluid, Manifest, Mps, Output, PpeSource, Scene, Stop, Time};
+pub use types::{Fluid, Manifest, Mps, Output, PpePreconditioner, PpeSource, Scene, Stop, Time};
 
 use locate::{Pos, SourceMap};
 use overrides::Touched;

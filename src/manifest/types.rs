@@ -168,6 +168,11 @@ pub struct Mps {
     /// Restitution coefficient of the collision model.
     #[serde(default = "default_collision_restitution")]
     pub collision_restitution: f64,
+    /// Preconditioner of the PPE conjugate-gradient solver: `jacobi` (the default, which
+    /// files written before the choice existed used) or `multigrid` (aggregation multigrid:
+    /// a few times fewer iterations; same solution to `ppe_tolerance`, other bits).
+    #[serde(default)]
+    pub ppe_preconditioner: PpePreconditioner,
     /// Relative residual tolerance of the PPE conjugate-gradient solver.
     #[serde(default = "default_ppe_tolerance")]
     pub ppe_tolerance: f64,
@@ -196,6 +201,7 @@ impl Default for Mps {
             surface_threshold: default_surface_threshold(),
             relaxation_coefficient: default_relaxation_coefficient(),
             source_term: default_source_term(),
+            ppe_preconditioner: PpePreconditioner::default(),
             compressibility_1_pa: default_compressibility_1_pa(),
             collision_distance: default_collision_distance(),
             collision_restitution: default_collision_restitution(),
@@ -227,6 +233,15 @@ fn default_relaxation_coefficient() -> f64 {
 pub enum PpeSource {
     NumberDensity,
     Mixed,
+}
+
+/// PPE preconditioner choice (see [`Mps::ppe_preconditioner`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PpePreconditioner {
+    #[default]
+    Jacobi,
+    Multigrid,
 }
 
 fn default_source_term() -> PpeSource {

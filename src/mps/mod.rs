@@ -1,6 +1,7 @@
 //! The MPS solver core, generic over the dimension `D` (2 or 3).
 pub mod grid;
 pub mod kernel;
+pub mod multigrid;
 pub mod operators;
 pub mod particles;
 pub mod pressure;

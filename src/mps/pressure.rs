@@ -1,5 +1,6 @@
 //! Sparse symmetric systems of the step (PPE and implicit viscosity): assembly in CSR and a
 //! Jacobi-preconditioned conjugate gradient.
+use super::multigrid::Multigrid;
 use super::reduce::{CHUNK, MIN_PARALLEL_LEN, PARTICLES_PER_TASK, sum_by};
 use rayon::prelude::*;
 
@@ -72,6 +73,17 @@ impl CsrMatrix {
             .for_each(|(i, yi)| *yi = self.row_product(i, x));
     }
 
+    /// Row i of A x.
+    #[inline]
+    pub fn row_value(&self, i: usize, x: &[f64]) -> f64 {
+        let range = self.row_offsets[i]..self.row_offsets[i + 1];
+        let mut s = self.diagonal[i] * x[i];
+        for (&c, &v) in self.columns[range.clone()].iter().zip(&self.values[range]) {
+            s += v * x[c as usize];
+        }
+        s
+    }
+
     /// Row i of A x, for M vectors.
     #[inline]
     fn row_product<const M: usize>(&self, i: usize, x: &[[f64; M]]) -> [f64; M] {
@@ -89,6 +101,15 @@ impl CsrMatrix {
         }
         s
     }
+}
+
+/// The preconditioner of a CG solve.
+#[derive(Clone, Copy)]
+pub enum Preconditioner<'a> {
+    /// z = D^-1 r.
+    Jacobi,
+    /// One multigrid cycle (built for the solve's matrix).
+    Multigrid(&'a Multigrid),
 }
 
 /// Outcome of a CG solve.
@@ -112,7 +133,14 @@ pub fn solve_pcg(
 ) -> SolveReport {
     let b: Vec<[f64; 1]> = b.iter().map(|&v| [v]).collect();
     let mut x1: Vec<[f64; 1]> = x.iter().map(|&v| [v]).collect();
-    let [report] = solve_pcg_many(a, &b, &mut x1, tolerance, max_iterations);
+    let [report] = solve_pcg_many(
+        a,
+        &b,
+        &mut x1,
+        tolerance,
+        max_iterations,
+        Preconditioner::Jacobi,
+    );
     for (x, v) in x.iter_mut().zip(&x1) {
         *x = v[0];
     }
@@ -134,6 +162,7 @@ pub fn solve_pcg_many<const M: usize>(
     x: &mut [[f64; M]],
     tolerance: f64,
     max_iterations: u32,
+    preconditioner: Preconditioner,
 ) -> [SolveReport; M] {
     let n = a.rows();
     let dot_m = |u: &[[f64; M]], v: &[[f64; M]], m: usize| sum_by(n, |i| u[i][m] * v[i][m]);
@@ -175,6 +204,22 @@ pub fn solve_pcg_many<const M: usize>(
         .zip(&inv_diag)
         .map(|(r, d)| std::array::from_fn(|m| r[m] * d))
         .collect();
+    let multigrid = match preconditioner {
+        Preconditioner::Jacobi => None,
+        Preconditioner::Multigrid(mg) => Some(mg),
+    };
+    // z = B r for the running components (the Jacobi z is formed with the updates).
+    let cycle = |r: &[[f64; M]], z: &mut [[f64; M]], running: &[bool; M]| {
+        if let Some(mg) = multigrid {
+            for m in (0..M).filter(|&m| running[m]) {
+                let r_m: Vec<f64> = r.iter().map(|v| v[m]).collect();
+                let mut z_m = vec![0.0; n];
+                mg.apply(a, &r_m, &mut z_m);
+                z.iter_mut().zip(&z_m).for_each(|(z, v)| z[m] = *v);
+            }
+        }
+    };
+    cycle(&r, &mut z, &running);
     let mut p = z.clone();
     let mut ap = vec![[0.0; M]; n];
     let mut rz: [f64; M] = std::array::from_fn(|m| dot_m(&r, &z, m));
@@ -243,7 +288,11 @@ pub fn solve_pcg_many<const M: usize>(
             .collect();
         let rz_sums: Vec<[f64; M]> = sums.iter().map(|s| s.0).collect();
         let rr_sums: Vec<[f64; M]> = sums.iter().map(|s| s.1).collect();
-        let (rz_new, rr) = (in_order(&rz_sums), in_order(&rr_sums));
+        let (mut rz_new, rr) = (in_order(&rz_sums), in_order(&rr_sums));
+        if multigrid.is_some() {
+            cycle(&r, &mut z, &running);
+            rz_new = std::array::from_fn(|m| dot_m(&r, &z, m));
+        }
         let mut beta = [0.0; M];
         for m in 0..M {
             if running[m] {

@@ -1,9 +1,10 @@
 //! One time step of the MPS method (DESIGN.md section 3), stage by stage.
 use super::grid::{KernelPairs, Neighbours};
 use super::kernel::{RefValues, weight};
+use super::multigrid::Multigrid;
 use super::operators::{gradient, number_density};
 use super::particles::{ParticleKind, Particles, Vector};
-use super::pressure::{CsrMatrix, SolveReport, solve_pcg};
+use super::pressure::{CsrMatrix, Preconditioner, SolveReport, solve_pcg, solve_pcg_many};
 use super::reduce::PARTICLES_PER_TASK;
 use super::reduce::max_by;
 use super::rheology::Rheology;
@@ -30,6 +31,8 @@ pub struct SolverConfig<const D: usize> {
     /// gamma: relaxation of the number-density source term.
     pub relaxation_coefficient: f64,
     pub source_term: SourceTerm,
+    /// Aggregation multigrid instead of Jacobi as the PPE preconditioner.
+    pub multigrid_ppe: bool,
     pub compressibility_1_pa: f64,
     pub collision_distance_m: f64,
     /// Collision distance between a fluid and a wall particle (see
@@ -621,13 +624,38 @@ impl<const D: usize> Solver<D> {
         // resumed runs start the solver from the same guess).
         let mut solution: Vec<f64> = rows.iter().map(|&i| p.pressure_pa[i]).collect();
         let solve_started = Instant::now();
-        let report = solve_pcg(
-            &matrix,
-            &rhs,
-            &mut solution,
-            c.ppe_tolerance,
-            c.ppe_max_iterations,
-        );
+        let report = if c.multigrid_ppe {
+            // Each unknown's lattice cell (spacings from the origin) sets its aggregates.
+            let l0 = c.spacing_m;
+            let cells: Vec<[i64; 3]> = rows
+                .iter()
+                .map(|&i| {
+                    let x = p.position_m[i];
+                    std::array::from_fn(|a| if a < D { (x[a] / l0).floor() as i64 } else { 0 })
+                })
+                .collect();
+            let multigrid = Multigrid::new(&matrix, &cells);
+            let b: Vec<[f64; 1]> = rhs.iter().map(|&v| [v]).collect();
+            let mut x: Vec<[f64; 1]> = solution.iter().map(|&v| [v]).collect();
+            let [report] = solve_pcg_many(
+                &matrix,
+                &b,
+                &mut x,
+                c.ppe_tolerance,
+                c.ppe_max_iterations,
+                Preconditioner::Multigrid(&multigrid),
+            );
+            solution = x.iter().map(|v| v[0]).collect();
+            report
+        } else {
+            solve_pcg(
+                &matrix,
+                &rhs,
+                &mut solution,
+                c.ppe_tolerance,
+                c.ppe_max_iterations,
+            )
+        };
         let solve_s = solve_started.elapsed().as_secs_f64();
         let pressure = &mut self.particles.pressure_pa;
         pressure.iter_mut().for_each(|v| *v = 0.0);

@@ -3,7 +3,7 @@
 use super::grid::{KernelPairs, Neighbours};
 use super::kernel::{RefValues, weight};
 use super::particles::{ParticleKind, Particles, Vector};
-use super::pressure::{CsrMatrix, SolveReport, solve_pcg_many};
+use super::pressure::{CsrMatrix, Preconditioner, SolveReport, solve_pcg_many};
 use super::reduce::PARTICLES_PER_TASK;
 use super::rheology::Rheology;
 use nalgebra::SMatrix;
@@ -190,6 +190,7 @@ pub fn predict_velocity<const D: usize>(
         &mut x,
         settings.tolerance,
         settings.max_iterations,
+        Preconditioner::Jacobi,
     );
     for report in reports {
         solve.iterations += report.iterations;
