@@ -166,7 +166,7 @@ fn l_flow_spec(s: &SceneSpec) -> Option<scene::l_flow::LFlow> {
     }
 }
 
-fn slump_spec(s: &SceneSpec) -> Option<scene::slump::Slump> {
+pub(crate) fn slump_spec(s: &SceneSpec) -> Option<scene::slump::Slump> {
     match *s {
         SceneSpec::Slump {
             cone_height_m,
@@ -205,7 +205,7 @@ fn moving_wall<const D: usize>(m: &Manifest, scene: &Scene<D>) -> Option<MovingW
 }
 
 /// Yield stress of the fluid (0 for a Newtonian one).
-fn yield_stress_pa(fluid: &Fluid) -> f64 {
+pub(crate) fn yield_stress_pa(fluid: &Fluid) -> f64 {
     match *fluid {
         Fluid::Newtonian { .. } => 0.0,
         Fluid::Bingham {

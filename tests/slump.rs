@@ -208,6 +208,8 @@ fn coarse_spread_matches_the_closed_form() {
             "output.diagnostics_interval_s=0.1",
             "output.checkpoint_interval_s=1",
             "stop.non_flowing_fraction=null",
+            // The whole 8 s (the rest rule would stop on the early plateau).
+            "stop.rest_metric=null",
         ],
     );
     let dir = tempfile::tempdir().unwrap();
@@ -259,6 +261,20 @@ fn coarse_spread_matches_the_closed_form() {
         .fold(0.0, f64::max);
     let last = end.kinetic_energy_j;
     assert!(last < 1e-3 * peak, "{last} J of {peak} J");
+    // `runner profile`'s h(r): every spacing from the axis to R, within a spacing of the
+    // closed form (a particle-thick pancake), and the same radius as the summary.
+    let profile = mps_runner::report::slump_profile(&run).unwrap();
+    assert!((profile.radius_m - radius).abs() < 1e-12);
+    assert_eq!(profile.points.len(), (radius / l0).floor() as usize + 1);
+    for q in &profile.points {
+        assert!(
+            (q.measured_m - q.closed_form_m).abs() < l0,
+            "h({:.3}) = {:.4} vs {:.4}",
+            q.r_m,
+            q.measured_m,
+            q.closed_form_m
+        );
+    }
     eprintln!(
         "spread radius {radius:.4} m (closed form {closed:.4} m), centre height {:.4} m",
         s["centre_height_m"]

@@ -125,10 +125,21 @@ enum Command {
     /// Draw the last particle frame of a run, coloured by a point field (SVG).
     Snapshot {
         run: PathBuf,
-        /// Point-cloud field to colour by (default: kind).
+        /// Point-cloud field to colour by (default: kind; `height_m`: the vertical coordinate).
         #[arg(long)]
         field: Option<String>,
+        /// 3D runs: view from above, fluid only (default: from the side, x-z, with walls).
+        #[arg(long)]
+        top: bool,
         /// Output file (default: <run>-snapshot-<field>.svg beside the run).
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
+    /// Slump-flow runs: the surface h(r) of the last checkpoint against the closed form
+    /// (Roussel & Coussot 2005), printed as a table and drawn (SVG).
+    Profile {
+        run: PathBuf,
+        /// Output file (default: <run>-profile.svg beside the run).
         #[arg(long)]
         out: Option<PathBuf>,
     },
@@ -219,8 +230,22 @@ fn main() -> ExitCode {
                 p.path
             }),
         ),
-        Some(Command::Snapshot { run, field, out }) => {
-            report_result(report::snapshot(&run, field.as_deref(), out.as_deref()))
+        Some(Command::Snapshot {
+            run,
+            field,
+            top,
+            out,
+        }) => report_result(report::snapshot(
+            &run,
+            field.as_deref(),
+            top,
+            out.as_deref(),
+        )),
+        Some(Command::Profile { run, out }) => {
+            report_result(report::profile(&run, out.as_deref()).map(|(path, table)| {
+                print!("{table}");
+                path
+            }))
         }
         None => run_command(cli.run),
     }

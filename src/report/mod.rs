@@ -349,7 +349,12 @@ pub fn default_sweep_metrics(metrics: &BTreeMap<String, f64>) -> Vec<String> {
 
 /// `runner snapshot`: the last `/particles` frame of a run, coloured by `field` (default
 /// `kind`). Default output: `<run>-snapshot-<field>.svg` beside the run file.
-pub fn snapshot(mcap: &Path, field: Option<&str>, out: Option<&Path>) -> Result<PathBuf> {
+pub fn snapshot(
+    mcap: &Path,
+    field: Option<&str>,
+    top: bool,
+    out: Option<&Path>,
+) -> Result<PathBuf> {
     let run = read(mcap)?;
     let Some(pc) = run.last_cloud.as_ref() else {
         return Err(ReportError::Input(format!(
@@ -357,9 +362,18 @@ pub fn snapshot(mcap: &Path, field: Option<&str>, out: Option<&Path>) -> Result<
             mcap.display()
         )));
     };
-    let frame = cloud::Frame::decode(pc)
+    let mut frame = cloud::Frame::decode(pc)
         .map_err(|e| ReportError::Input(format!("{}: /particles: {e}", mcap.display())))?;
     let field = field.unwrap_or("kind");
+    if field == "height_m" {
+        // The vertical coordinate as a field (3D from above: the height of the surface).
+        let vertical = if frame.z.iter().all(|z| *z == 0.0) {
+            &frame.y
+        } else {
+            &frame.z
+        };
+        frame.fields.insert("height_m".into(), vertical.clone());
+    }
     if !frame.fields.contains_key(field) {
         return Err(ReportError::Input(format!(
             "{}: the point cloud has no field `{field}`; fields: {}",
@@ -374,8 +388,14 @@ pub fn snapshot(mcap: &Path, field: Option<&str>, out: Option<&Path>) -> Result<
         } else {
             3
         });
+    let view = match (dimension == 3, top) {
+        (true, true) => plot::View::Top,
+        (true, false) => plot::View::Side,
+        (false, _) => plot::View::Plane,
+    };
+    let suffix = if view == plot::View::Top { "-top" } else { "" };
     let out = out.map_or_else(
-        || beside(mcap, &format!("-snapshot-{}.svg", slug(field))),
+        || beside(mcap, &format!("-snapshot{suffix}-{}.svg", slug(field))),
         Path::to_path_buf,
     );
     let time = pc
@@ -383,6 +403,140 @@ pub fn snapshot(mcap: &Path, field: Option<&str>, out: Option<&Path>) -> Result<
         .as_ref()
         .map_or(0.0, |t| t.seconds as f64 + f64::from(t.nanos) * 1e-9);
     let title = format!("{} at t = {time} s: {field}", run_title(&run));
-    plot::snapshot_plot(&out, &title, &frame, field, dimension == 3)?;
+    plot::snapshot_plot(&out, &title, &frame, field, view)?;
     Ok(out)
+}
+
+/// One radius of a slump-flow surface profile (m).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ProfilePoint {
+    pub r_m: f64,
+    /// Height of the highest concrete particle within l0/2 of r, plus l0/2.
+    pub measured_m: f64,
+    /// Roussel & Coussot h(r) with the run's measured radius.
+    pub closed_form_m: f64,
+}
+
+/// The surface at rest of a slump-flow run against the closed form: measured mean spread
+/// radius, closed-form radius for the concrete's volume, and h(r) every spacing from the axis
+/// to the measured radius.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SlumpProfile {
+    pub time_s: f64,
+    pub spacing_m: f64,
+    pub radius_m: f64,
+    pub closed_form_radius_m: f64,
+    pub points: Vec<ProfilePoint>,
+}
+
+/// Profile of the last checkpoint of a slump-flow run.
+pub fn slump_profile(run: &RunFile) -> Result<SlumpProfile> {
+    use crate::scene::slump;
+    let resolved = crate::restore::manifest_of(run)
+        .map_err(|e| ReportError::Input(format!("the run's manifest: {e}")))?;
+    let m = &resolved.manifest;
+    let Some(spec) = crate::run::slump_spec(&m.scene) else {
+        return Err(ReportError::Input(format!(
+            "run `{}` is not a slump-flow run (scene.kind slump)",
+            m.name
+        )));
+    };
+    let tau = crate::run::yield_stress_pa(&m.fluid);
+    if tau <= 0.0 {
+        return Err(ReportError::Input(
+            "the closed form needs a yield stress (fluid.model bingham or bi_viscosity)".into(),
+        ));
+    }
+    let state = run
+        .states
+        .last()
+        .ok_or_else(|| ReportError::Input("the run has no checkpoint".into()))?;
+    let particles = crate::checkpoint::particles_from_message::<3>(state)
+        .map_err(|e| ReportError::Input(format!("last checkpoint: {e}")))?;
+    let (l0, rho, g) = (m.spacing_m, m.fluid.density_kg_m3(), m.gravity_m_s2);
+    let z_max = spec.cone_height_m;
+    let radii = slump::spread_radii_m(&particles, l0, z_max);
+    let radius_m = radii.iter().sum::<f64>() / radii.len() as f64;
+    let on_plate = (0..particles.len())
+        .filter(|&i| slump::on_plate(&particles, i, z_max))
+        .count();
+    let volume = on_plate as f64 * l0.powi(3);
+    let closed_form_radius_m = slump::closed_form_radius_m(rho, g, volume, tau);
+    let points = (0..)
+        .map(|k| k as f64 * l0)
+        .take_while(|&r| r <= radius_m)
+        .map(|r| ProfilePoint {
+            r_m: r,
+            measured_m: slump::surface_height_m(&particles, l0, r, 0.5 * l0, z_max),
+            closed_form_m: slump::closed_form_height_m(rho, g, tau, radius_m, r),
+        })
+        .collect();
+    Ok(SlumpProfile {
+        time_s: state.time_s,
+        spacing_m: l0,
+        radius_m,
+        closed_form_radius_m,
+        points,
+    })
+}
+
+/// `runner profile`: the slump profile as a table (returned) and an SVG plot (default
+/// `<run>-profile.svg` beside the run file) with the closed form for the measured radius and
+/// for the closed-form radius.
+pub fn profile(mcap: &Path, out: Option<&Path>) -> Result<(PathBuf, String)> {
+    use crate::scene::slump::closed_form_height_m;
+    let run = read(mcap)?;
+    let p = slump_profile(&run)?;
+    let resolved = crate::restore::manifest_of(&run)
+        .map_err(|e| ReportError::Input(format!("the run's manifest: {e}")))?;
+    let m = &resolved.manifest;
+    let (rho, g, tau) = (
+        m.fluid.density_kg_m3(),
+        m.gravity_m_s2,
+        crate::run::yield_stress_pa(&m.fluid),
+    );
+    let mut table = format!(
+        "{} at t = {:.3} s (spacing {} m): spread radius {:.4} m (diameter {:.1} mm), closed form {:.4} m ({:+.1} %)\n",
+        run_title(&run),
+        p.time_s,
+        p.spacing_m,
+        p.radius_m,
+        2000.0 * p.radius_m,
+        p.closed_form_radius_m,
+        100.0 * (p.radius_m / p.closed_form_radius_m - 1.0)
+    );
+    table += "r_m       h_measured_m  h_closed_form_m  difference_m\n";
+    for q in &p.points {
+        table += &format!(
+            "{:<9.4} {:<13.4} {:<16.4} {:+.4}\n",
+            q.r_m,
+            q.measured_m,
+            q.closed_form_m,
+            q.measured_m - q.closed_form_m
+        );
+    }
+    let fine = |radius: f64| -> Vec<(f64, f64)> {
+        (0..=200)
+            .map(|k| radius * f64::from(k) / 200.0)
+            .map(|r| (r, closed_form_height_m(rho, g, tau, radius, r)))
+            .collect()
+    };
+    let series = [
+        Series {
+            label: "MPS surface (top particle + l0/2)".into(),
+            points: p.points.iter().map(|q| (q.r_m, q.measured_m)).collect(),
+        },
+        Series {
+            label: format!("h(r), measured R = {:.3} m", p.radius_m),
+            points: fine(p.radius_m),
+        },
+        Series {
+            label: format!("h(r), closed-form R = {:.3} m", p.closed_form_radius_m),
+            points: fine(p.closed_form_radius_m),
+        },
+    ];
+    let out = out.map_or_else(|| beside(mcap, "-profile.svg"), Path::to_path_buf);
+    let title = format!("{}: surface at t = {:.2} s", run_title(&run), p.time_s);
+    plot::line_plot(&out, &title, "r [m]", "h [m]", &series, false)?;
+    Ok((out, table))
 }

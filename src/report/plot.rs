@@ -159,13 +159,19 @@ pub fn coloring(values: &[f32]) -> Coloring {
         cats.sort();
         return Coloring::Categorical(cats);
     }
-    let finite = values
+    // The ramp spans the 1st to 99th percentile, so that a few outliers (a splash, particles
+    // stuck to a lifted cone) do not wash out the rest; values beyond are clamped.
+    let mut finite: Vec<f64> = values
         .iter()
         .filter(|v| v.is_finite())
-        .map(|v| f64::from(*v));
-    let lo = finite.clone().fold(f64::INFINITY, f64::min);
-    let hi = finite.fold(f64::NEG_INFINITY, f64::max);
-    Coloring::Ramp(lo, hi)
+        .map(|v| f64::from(*v))
+        .collect();
+    if finite.is_empty() {
+        return Coloring::Ramp(0.0, 1.0);
+    }
+    finite.sort_by(f64::total_cmp);
+    let at = |q: f64| finite[((finite.len() - 1) as f64 * q).round() as usize];
+    Coloring::Ramp(at(0.01), at(0.99))
 }
 
 /// Blue (0) to red (1).
@@ -179,18 +185,29 @@ pub fn ramp(t: f64) -> RGBColor {
     RGBColor(r, g, b)
 }
 
-/// Particles of the last frame as dots, equal axis scales: x-y (2D) or x-z (`side_view`,
-/// 3D). Walls (`kind` 1 or 2) are grey; the others are coloured by `field`. One `<circle>`
-/// per particle.
+/// Which plane a snapshot shows.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum View {
+    /// x-y with walls (2D runs).
+    Plane,
+    /// x-z with walls (3D runs from the side).
+    Side,
+    /// x-y of the fluid alone, walls left out (3D runs from above; a plate would hide all).
+    Top,
+}
+
+/// Particles of the last frame as dots, equal axis scales (see [`View`]). Walls (`kind` 1
+/// or 2) are grey; the others are coloured by `field`. One `<circle>` per particle.
 pub fn snapshot_plot(
     path: &Path,
     title: &str,
     frame: &Frame,
     field: &str,
-    side_view: bool,
+    view: View,
 ) -> Result<()> {
     let err = write_err(path);
     let e = |x: &dyn std::fmt::Display| err(x.to_string());
+    let side_view = view == View::Side;
     let vertical = if side_view { &frame.z } else { &frame.y };
     let pts: Vec<(f64, f64)> = frame
         .x
@@ -198,16 +215,18 @@ pub fn snapshot_plot(
         .zip(vertical)
         .map(|(x, y)| (f64::from(*x), f64::from(*y)))
         .collect();
-    let ((x0, x1), (y0, y1)) = bounds(pts.iter().copied());
+    let kind = frame.fields.get("kind");
+    let is_wall = |i: usize| kind.is_some_and(|k| k[i] == 1.0 || k[i] == 2.0);
+    let shown = |i: usize| view != View::Top || !is_wall(i);
+    let ((x0, x1), (y0, y1)) = bounds((0..pts.len()).filter(|&i| shown(i)).map(|i| pts[i]));
     let width = 1000u32;
     let plot_w = f64::from(width - 120);
     let plot_h = (plot_w * (y1 - y0) / (x1 - x0)).clamp(150.0, 1400.0);
     let height = plot_h as u32 + 110;
-    let kind = frame.fields.get("kind");
-    let is_wall = |i: usize| kind.is_some_and(|k| k[i] == 1.0 || k[i] == 2.0);
+
     let values = &frame.fields[field];
     let colored: Vec<f32> = (0..pts.len())
-        .filter(|&i| !is_wall(i) || field == "kind")
+        .filter(|&i| shown(i) && (!is_wall(i) || field == "kind"))
         .map(|i| values[i])
         .collect();
     let coloring = coloring(&colored);
@@ -239,7 +258,7 @@ pub fn snapshot_plot(
     };
     let radius = ((plot_w / (x1 - x0)) * 0.004).clamp(1.0, 4.0) as i32;
     let walls: Vec<usize> = (0..pts.len())
-        .filter(|&i| is_wall(i) && field != "kind")
+        .filter(|&i| shown(i) && is_wall(i) && field != "kind")
         .collect();
     if !walls.is_empty() {
         chart
@@ -252,9 +271,13 @@ pub fn snapshot_plot(
             .label("wall")
             .legend(|(x, y)| Rectangle::new([(x, y - 5), (x + 12, y + 5)], WALL_GREY.filled()));
     }
-    let others: Vec<usize> = (0..pts.len())
-        .filter(|&i| !is_wall(i) || field == "kind")
+    let mut others: Vec<usize> = (0..pts.len())
+        .filter(|&i| shown(i) && (!is_wall(i) || field == "kind"))
         .collect();
+    if view == View::Top {
+        // Seen from above: the highest particles are drawn last, on top.
+        others.sort_by(|&a, &b| frame.z[a].total_cmp(&frame.z[b]));
+    }
     match &coloring {
         Coloring::Categorical(cats) => {
             for (ci, cat) in cats.iter().enumerate() {
@@ -282,7 +305,7 @@ pub fn snapshot_plot(
                         .map(|&i| Circle::new(pts[i], radius, color_of(values[i]).filled())),
                 )
                 .map_err(|x| e(&x))?;
-            for (t, name) in [(0.0, "min"), (1.0, "max")] {
+            for (t, name) in [(0.0, "1st percentile"), (1.0, "99th percentile")] {
                 let v = lo + t * (hi - lo);
                 let color = ramp(t);
                 chart
