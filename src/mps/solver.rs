@@ -197,7 +197,7 @@ pub struct Solver<const D: usize> {
 /// valid until a particle has moved half of it. Lists are in index order and operators skip
 /// pairs beyond their radius, so results do not depend on when lists were rebuilt (the same
 /// bits as fresh lists every stage).
-const LIST_SKIN: f64 = 0.3;
+const LIST_SKIN: f64 = 0.5;
 
 impl<const D: usize> Solver<D> {
     pub fn new(config: SolverConfig<D>, particles: Particles<D>) -> Self {
