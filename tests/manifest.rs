@@ -235,8 +235,13 @@ fn example_files_parse() {
     assert_eq!(m.output.checkpoint_interval_s, 0.1);
     assert_eq!(m.output.cloud_interval_s, 0.02);
     assert_eq!(m.output.diagnostics_interval_s, 0.005);
-    // Its values are FULL's (defaults written out), except for the name.
-    let full = ok(&edit(FULL, "name: full_example", "name: dam_break_2d"));
+    // Its values are FULL's (defaults written out), except for the name and the multigrid
+    // preconditioner (the default stays Jacobi, which earlier files used).
+    let full = ok(&edit(
+        &edit(FULL, "name: full_example", "name: dam_break_2d"),
+        "  ppe_tolerance:",
+        "  ppe_preconditioner: multigrid\n  ppe_tolerance:",
+    ));
     assert_eq!(d.manifest, full.manifest);
     assert_eq!(d.hash_hex, full.hash_hex);
 
