@@ -277,3 +277,21 @@ fn multigrid_preconditioner_cuts_iterations_and_keeps_bits_across_threads() {
     let bn: f64 = b.iter().map(|v| v[0] * v[0]).sum::<f64>().sqrt();
     assert!(r / bn < 10.0 * tol, "true residual {}", r / bn);
 }
+
+#[test]
+fn inactive_particles_are_nobodys_neighbours_and_others_need_no_list() {
+    // Ghosts (fluid that left the domain) take part in nothing; particles that are not
+    // centres (dummy layers) are neighbours but have no list of their own.
+    let l0 = 0.01;
+    let pos: Vec<Vector<2>> = (0..100)
+        .map(|k| Vector::<2>::new((k % 10) as f64 * l0, (k / 10) as f64 * l0))
+        .collect();
+    let (ghost, dummy) = (44, 45);
+    let nb = Neighbours::build_centres(&pos, 3.1 * l0, |i| i != ghost, |i| i != dummy);
+    for i in 0..pos.len() {
+        assert!(!nb.of(i).contains(&(ghost as u32)), "{i} lists the ghost");
+    }
+    assert!(nb.of(ghost).is_empty() && nb.of(dummy).is_empty());
+    assert!(nb.of(46).contains(&(dummy as u32)));
+    assert!(!nb.of(43).is_empty());
+}

@@ -44,22 +44,12 @@ impl Neighbours {
 
     /// All j != i with |r_j - r_i| < cutoff_m, for every particle.
     pub fn build<const D: usize>(positions: &[Vector<D>], cutoff_m: f64) -> Self {
-        Self::build_active(positions, cutoff_m, |_| true)
+        Self::build_general(positions, cutoff_m, None, &|_| true, &|_| true)
     }
 
-    /// As [`Neighbours::build`], but particles with `active(i) == false` neither have nor are
-    /// neighbours.
-    pub fn build_active<const D: usize>(
-        positions: &[Vector<D>],
-        cutoff_m: f64,
-        active: impl Fn(usize) -> bool + Sync,
-    ) -> Self {
-        Self::build_general(positions, cutoff_m, None, &active, &active)
-    }
-
-    /// As [`Neighbours::build_active`], but only particles with `centre(i)` (and active) get a
-    /// list of their own; the others stay neighbours of those (dummy wall layers: no operator
-    /// is ever evaluated at them).
+    /// As [`Neighbours::build`] for the particles with `active(i)`: only those with
+    /// `centre(i)` too get a list of their own; the other active ones are neighbours only
+    /// (dummy wall layers: no operator is ever evaluated at them).
     pub fn build_centres<const D: usize>(
         positions: &[Vector<D>],
         cutoff_m: f64,
@@ -69,27 +59,12 @@ impl Neighbours {
         Self::build_general(positions, cutoff_m, None, &active, &centre)
     }
 
-    /// The pairs of these lists closer than `radius_m` (and not coincident), in the same order:
-    /// exactly the pairs with a nonzero weight w(r) for that radius. Operators that skip
-    /// zero-weight pairs give the same bits on the filtered lists, and visit far fewer pairs
-    /// (in 3D the number-density radius holds a quarter of the Verlet list).
-    pub fn within<const D: usize>(&self, positions: &[Vector<D>], radius_m: f64) -> Self {
-        self.within_where(positions, radius_m, |_| true)
-    }
-
-    /// As [`Neighbours::within`] for the lists of particles with `keep(i)`; the others get
-    /// empty lists.
-    pub fn within_where<const D: usize>(
-        &self,
-        positions: &[Vector<D>],
-        radius_m: f64,
-        keep: impl Fn(usize) -> bool + Sync,
-    ) -> Self {
-        self.within_two(positions, radius_m, radius_m, keep).0
-    }
-
-    /// Both cuts at once, to `outer_m` and to `inner_m <= outer_m`, for particles with
-    /// `keep(i)` (one distance per pair).
+    /// The pairs of these lists closer than `outer_m` and those closer than `inner_m <=
+    /// outer_m` (and not coincident), in the same order, for particles with `keep(i)` (the
+    /// others get empty lists; one distance per pair): exactly the pairs with a nonzero weight
+    /// w(r) for each radius. Operators that skip zero-weight pairs give the same bits on the
+    /// cut lists, and visit far fewer pairs (in 3D the number-density radius holds a quarter
+    /// of the Verlet list).
     pub fn within_two<const D: usize>(
         &self,
         positions: &[Vector<D>],
@@ -314,6 +289,7 @@ impl Neighbours {
                         let f = flat(&c);
                         for &j in &sorted[start[f]..start[f + 1]] {
                             if j as usize != i
+                                && active(j as usize)
                                 && self_displacement(j as usize, i).norm_squared() < cutoff2
                             {
                                 list.push(j);

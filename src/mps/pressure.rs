@@ -208,7 +208,9 @@ pub fn solve_pcg_many<const M: usize>(
         Preconditioner::Jacobi => None,
         Preconditioner::Multigrid(mg) => Some(mg),
     };
-    // z = B r for the running components (the Jacobi z is formed with the updates).
+    let jacobi = multigrid.is_none();
+    // z = B r for the running components (multigrid; the Jacobi z is formed with the
+    // updates).
     let cycle = |r: &[[f64; M]], z: &mut [[f64; M]], running: &[bool; M]| {
         if let Some(mg) = multigrid {
             for m in (0..M).filter(|&m| running[m]) {
@@ -263,7 +265,7 @@ pub fn solve_pcg_many<const M: usize>(
                 alpha[m] = rz[m] / p_ap[m];
             }
         }
-        // x += alpha p, r -= alpha Ap, z = D^-1 r, with r . z and r . r.
+        // x += alpha p, r -= alpha Ap, with r . r; Jacobi: z = D^-1 r and r . z too.
         let sums: Vec<([f64; M], [f64; M])> = x
             .par_chunks_mut(CHUNK)
             .zip(r.par_chunks_mut(CHUNK))
@@ -277,8 +279,10 @@ pub fn solve_pcg_many<const M: usize>(
                         if running[m] {
                             x[k][m] += alpha[m] * p[i][m];
                             r[k][m] -= alpha[m] * ap[i][m];
-                            z[k][m] = r[k][m] * inv_diag[i];
-                            rz[m] += r[k][m] * z[k][m];
+                            if jacobi {
+                                z[k][m] = r[k][m] * inv_diag[i];
+                                rz[m] += r[k][m] * z[k][m];
+                            }
                             rr[m] += r[k][m] * r[k][m];
                         }
                     }
