@@ -315,33 +315,18 @@ pub fn experiment_metrics<const D: usize>(
 }
 
 /// Names of the metrics that [`experiment_metrics`] gives for this manifest (without a
-/// scene to measure).
+/// scene to measure): its keys for an empty particle set, since which metrics exist depends
+/// on the manifest alone.
 pub fn metric_names(m: &Manifest) -> Vec<String> {
-    let mut names = vec!["front_position_m".to_string()];
-    if l_flow_spec(&m.scene).is_some() {
-        names.push("l_flow_value_m".into());
+    if m.dimension == 3 {
+        experiment_metrics(m, &Particles::<3>::default())
+            .into_keys()
+            .collect()
+    } else {
+        experiment_metrics(m, &Particles::<2>::default())
+            .into_keys()
+            .collect()
     }
-    if slump_spec(&m.scene).is_some() {
-        for name in [
-            "spread_radius_mean_m",
-            "spread_radius_min_m",
-            "spread_radius_max_m",
-            "spread_diameter_m",
-            "centre_height_m",
-        ] {
-            names.push(name.into());
-        }
-        if yield_stress_pa(&m.fluid) > 0.0 {
-            names.push("fluid_on_plate_count".into());
-            names.push("closed_form_radius_m".into());
-            for r in ["r25", "r50", "r75"] {
-                names.push(format!("surface_height_{r}_m"));
-                names.push(format!("closed_form_height_{r}_m"));
-            }
-        }
-    }
-    names.sort();
-    names
 }
 
 /// Slump-flow metrics (README, *Experiment manifests*): spread radius over the octants, the

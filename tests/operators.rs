@@ -154,7 +154,7 @@ fn pcg_meets_its_residual_tolerance() {
     let b = product(&a, &x_true);
     let mut x = vec![0.0; m * m];
     let tol = 1e-10;
-    let report = solve_pcg(&a, &b, &mut x, tol, 10_000);
+    let report = solve_pcg(&a, &b, &mut x, tol, 10_000, Preconditioner::Jacobi);
     assert!(report.converged, "{report:?}");
     // The true residual (not the recursively updated one) meets the tolerance.
     let ax = product(&a, &x);
@@ -174,7 +174,7 @@ fn pcg_meets_its_residual_tolerance() {
     assert!(err < 1e-6, "max error {err}");
     // An iteration cap below what the system needs is reported as not converged.
     x.iter_mut().for_each(|v| *v = 0.0);
-    let capped = solve_pcg(&a, &b, &mut x, tol, 5);
+    let capped = solve_pcg(&a, &b, &mut x, tol, 5, Preconditioner::Jacobi);
     assert!(!capped.converged && capped.iterations == 5);
 }
 
@@ -201,7 +201,14 @@ fn side_by_side_solves_give_the_bits_of_single_solves() {
     for axis in 0..3 {
         let b_axis: Vec<f64> = b.iter().map(|v| v[axis]).collect();
         let mut alone: Vec<f64> = guess.iter().map(|v| v[axis]).collect();
-        let report = solve_pcg(&a, &b_axis, &mut alone, 1e-10, 10_000);
+        let report = solve_pcg(
+            &a,
+            &b_axis,
+            &mut alone,
+            1e-10,
+            10_000,
+            Preconditioner::Jacobi,
+        );
         assert_eq!(report, reports[axis], "axis {axis}");
         for i in 0..n {
             assert_eq!(

@@ -121,8 +121,8 @@ pub struct SolveReport {
     pub converged: bool,
 }
 
-/// Solves A x = b for symmetric positive definite A with a Jacobi preconditioner, starting from
-/// the guess in `x`. Stops when ||r|| <= tolerance ||b||. All reductions are order-fixed
+/// Solves A x = b for symmetric positive definite A with the given preconditioner, starting
+/// from the guess in `x`. Stops when ||r|| <= tolerance ||b||. All reductions are order-fixed
 /// (DESIGN.md 6).
 pub fn solve_pcg(
     a: &CsrMatrix,
@@ -130,17 +130,11 @@ pub fn solve_pcg(
     x: &mut [f64],
     tolerance: f64,
     max_iterations: u32,
+    preconditioner: Preconditioner,
 ) -> SolveReport {
     let b: Vec<[f64; 1]> = b.iter().map(|&v| [v]).collect();
     let mut x1: Vec<[f64; 1]> = x.iter().map(|&v| [v]).collect();
-    let [report] = solve_pcg_many(
-        a,
-        &b,
-        &mut x1,
-        tolerance,
-        max_iterations,
-        Preconditioner::Jacobi,
-    );
+    let [report] = solve_pcg_many(a, &b, &mut x1, tolerance, max_iterations, preconditioner);
     for (x, v) in x.iter_mut().zip(&x1) {
         *x = v[0];
     }
@@ -198,17 +192,20 @@ pub fn solve_pcg_many<const M: usize>(
                 r[m] = b[m] - r[m];
             }
         });
-    let mut z: Vec<[f64; M]> = r
-        .par_iter()
-        .with_min_len(MIN_PARALLEL_LEN)
-        .zip(&inv_diag)
-        .map(|(r, d)| std::array::from_fn(|m| r[m] * d))
-        .collect();
     let multigrid = match preconditioner {
         Preconditioner::Jacobi => None,
         Preconditioner::Multigrid(mg) => Some(mg),
     };
     let jacobi = multigrid.is_none();
+    let mut z: Vec<[f64; M]> = if jacobi {
+        r.par_iter()
+            .with_min_len(MIN_PARALLEL_LEN)
+            .zip(&inv_diag)
+            .map(|(r, d)| std::array::from_fn(|m| r[m] * d))
+            .collect()
+    } else {
+        vec![[0.0; M]; n]
+    };
     // z = B r for the running components (multigrid; the Jacobi z is formed with the
     // updates).
     let cycle = |r: &[[f64; M]], z: &mut [[f64; M]], running: &[bool; M]| {

@@ -4,7 +4,7 @@ use super::kernel::{RefValues, weight};
 use super::multigrid::Multigrid;
 use super::operators::{gradient, number_density};
 use super::particles::{ParticleKind, Particles, Vector};
-use super::pressure::{CsrMatrix, Preconditioner, SolveReport, solve_pcg, solve_pcg_many};
+use super::pressure::{CsrMatrix, Preconditioner, SolveReport, solve_pcg};
 use super::reduce::PARTICLES_PER_TASK;
 use super::reduce::max_by;
 use super::rheology::Rheology;
@@ -624,8 +624,9 @@ impl<const D: usize> Solver<D> {
         // resumed runs start the solver from the same guess).
         let mut solution: Vec<f64> = rows.iter().map(|&i| p.pressure_pa[i]).collect();
         let solve_started = Instant::now();
-        let report = if c.multigrid_ppe {
-            // Each unknown's lattice cell (spacings from the origin) sets its aggregates.
+        // Multigrid: each unknown's lattice cell (spacings from the origin) sets its
+        // aggregates.
+        let multigrid = c.multigrid_ppe.then(|| {
             let l0 = c.spacing_m;
             let cells: Vec<[i64; 3]> = rows
                 .iter()
@@ -634,28 +635,18 @@ impl<const D: usize> Solver<D> {
                     std::array::from_fn(|a| if a < D { (x[a] / l0).floor() as i64 } else { 0 })
                 })
                 .collect();
-            let multigrid = Multigrid::new(&matrix, &cells);
-            let b: Vec<[f64; 1]> = rhs.iter().map(|&v| [v]).collect();
-            let mut x: Vec<[f64; 1]> = solution.iter().map(|&v| [v]).collect();
-            let [report] = solve_pcg_many(
-                &matrix,
-                &b,
-                &mut x,
-                c.ppe_tolerance,
-                c.ppe_max_iterations,
-                Preconditioner::Multigrid(&multigrid),
-            );
-            solution = x.iter().map(|v| v[0]).collect();
-            report
-        } else {
-            solve_pcg(
-                &matrix,
-                &rhs,
-                &mut solution,
-                c.ppe_tolerance,
-                c.ppe_max_iterations,
-            )
-        };
+            Multigrid::new(&matrix, &cells)
+        });
+        let report = solve_pcg(
+            &matrix,
+            &rhs,
+            &mut solution,
+            c.ppe_tolerance,
+            c.ppe_max_iterations,
+            multigrid
+                .as_ref()
+                .map_or(Preconditioner::Jacobi, Preconditioner::Multigrid),
+        );
         let solve_s = solve_started.elapsed().as_secs_f64();
         let pressure = &mut self.particles.pressure_pa;
         pressure.iter_mut().for_each(|v| *v = 0.0);

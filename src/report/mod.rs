@@ -424,6 +424,9 @@ pub struct ProfilePoint {
 pub struct SlumpProfile {
     pub time_s: f64,
     pub spacing_m: f64,
+    pub density_kg_m3: f64,
+    pub gravity_m_s2: f64,
+    pub yield_stress_pa: f64,
     pub radius_m: f64,
     pub closed_form_radius_m: f64,
     pub points: Vec<ProfilePoint>,
@@ -474,6 +477,9 @@ pub fn slump_profile(run: &RunFile) -> Result<SlumpProfile> {
     Ok(SlumpProfile {
         time_s: state.time_s,
         spacing_m: l0,
+        density_kg_m3: rho,
+        gravity_m_s2: g,
+        yield_stress_pa: tau,
         radius_m,
         closed_form_radius_m,
         points,
@@ -487,14 +493,7 @@ pub fn profile(mcap: &Path, out: Option<&Path>) -> Result<(PathBuf, String)> {
     use crate::scene::slump::closed_form_height_m;
     let run = read(mcap)?;
     let p = slump_profile(&run)?;
-    let resolved = crate::restore::manifest_of(&run)
-        .map_err(|e| ReportError::Input(format!("the run's manifest: {e}")))?;
-    let m = &resolved.manifest;
-    let (rho, g, tau) = (
-        m.fluid.density_kg_m3(),
-        m.gravity_m_s2,
-        crate::run::yield_stress_pa(&m.fluid),
-    );
+    let (rho, g, tau) = (p.density_kg_m3, p.gravity_m_s2, p.yield_stress_pa);
     let mut table = format!(
         "{} at t = {:.3} s (spacing {} m): spread radius {:.4} m (diameter {:.1} mm), closed form {:.4} m ({:+.1} %)\n",
         run_title(&run),
