@@ -1,0 +1,77 @@
+//! Golden checksums: the final checkpoint hash of four small runs, pinned before the test
+//! modules were moved (issue "One module per workability test"). A refactor must keep them;
+//! a value is re-minted only when a change is meant to alter the simulation, and the commit
+//! that does so says why. Each case runs on 1 and on 2 threads (DESIGN.md section 6).
+mod common;
+use mps_runner::record::Outcome;
+
+/// (experiment file, overrides, final checkpoint SHA-256).
+const CASES: &[(&str, &[&str], &str)] = &[
+    (
+        "smoke_2d.yaml",
+        &[],
+        "04276690291f5b707b6f7fc93fc615c458e4c46184f0fa74082d90a4bc9068a6",
+    ),
+    // The dam break at 20 mm, multigrid PPE, 0.3 s (the surge has hit the far wall).
+    (
+        "dam_break_2d.yaml",
+        &["spacing_m=0.02", "time.end_s=0.3"],
+        "0ccd2f4052b5fdb89e286845aec58b7d894ba197837e5a9e69aeb65e81624812",
+    ),
+    // A coarse L-flow (Bingham, eq. 8 term on, dt = 1e-4 s), 0.3 s into the flow.
+    (
+        "l_flow_2d.yaml",
+        &["spacing_m=0.02", "time.end_s=0.3"],
+        "5bc6656d49b7ae989702a51d703501585e66cd52a926d71495bcfac1094d8cd7",
+    ),
+    // The slump at 25 mm: the cone rises 50 mm by 0.25 s and then stays (both phases of the
+    // moving wall), 0.4 s.
+    (
+        "slump_3d.yaml",
+        &[
+            "spacing_m=0.025",
+            "time.end_s=0.4",
+            "scene.lift_height_m=0.05",
+        ],
+        "daa36bfa0be0ffdd2a13fb8e360f55013264c3f6bed557d7ae898b13676d6ba6",
+    ),
+];
+
+fn final_hash(experiment: &str, sets: &[&str], threads: usize) -> String {
+    let resolved = common::resolve(experiment, sets);
+    let dir = tempfile::tempdir().unwrap();
+    let result = common::run_in(&resolved, dir.path(), threads);
+    assert_eq!(
+        result.outcome,
+        Outcome::Completed,
+        "{}",
+        result.summary.reason
+    );
+    result
+        .summary
+        .checkpoints
+        .last()
+        .expect("a run logs its final state")
+        .state_sha256
+        .clone()
+}
+
+#[test]
+fn golden_final_checkpoint_hashes_on_one_and_two_threads() {
+    let mut wrong = Vec::new();
+    for (experiment, sets, golden) in CASES {
+        for threads in [1, 2] {
+            let got = final_hash(experiment, sets, threads);
+            if got != *golden {
+                wrong.push(format!(
+                    "{experiment} {sets:?} on {threads} thread(s): {got}, golden {golden}"
+                ));
+            }
+        }
+    }
+    assert!(
+        wrong.is_empty(),
+        "state bits changed:\n{}",
+        wrong.join("\n")
+    );
+}
