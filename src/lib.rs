@@ -1,5 +1,6 @@
 pub mod build_info;
 pub mod checkpoint;
+pub mod experiment;
 pub mod manifest;
 pub mod mps;
 pub mod proto;
@@ -8,6 +9,5 @@ pub mod report;
 pub mod restore;
 pub mod resume;
 pub mod run;
-pub mod scene;
 pub mod sweep_run;
 pub mod verify;

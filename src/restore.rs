@@ -2,14 +2,14 @@
 //! manifest rebuilt from the canonical form stored in the file and checked against its hash,
 //! the messages in file order, and a solver restored from a logged checkpoint.
 use crate::checkpoint;
-use crate::manifest::{self, Manifest, Resolved};
+use crate::experiment::{self, Manifest, Resolved, build_scene};
 use crate::mps::Solver;
 use crate::proto::foxglove::PointCloud;
 use crate::proto::mps::v1::{Diagnostics, StateCheckpoint, Summary};
 use crate::record::{
     META_MANIFEST, RunFile, TOPIC_DIAGNOSTICS, TOPIC_PARTICLES, TOPIC_STATE, TOPIC_SUMMARY,
 };
-use crate::run::{build_scene, solver_config};
+use crate::run::solver_config;
 use mcap::read::{ChunkReader, LinearReader, Options};
 use mcap::records::Record;
 use prost::Message as _;
@@ -48,7 +48,7 @@ pub fn manifest_of(run: &RunFile) -> Result<Resolved, ManifestCheck> {
     let canonical = field("canonical")?;
     let recorded = field("experiment_sha256")?;
     let name = meta.get("name").map_or("manifest", |s| s.as_str());
-    let resolved = manifest::from_str(canonical, &format!("{name} (stored canonical)"), &[])
+    let resolved = experiment::from_str(canonical, &format!("{name} (stored canonical)"), &[])
         .map_err(|e| ManifestCheck::Invalid(e.to_string()))?;
     if resolved.hash_hex != *recorded {
         return Err(ManifestCheck::Mismatch(format!(
@@ -80,7 +80,7 @@ pub fn manifest_of(run: &RunFile) -> Result<Resolved, ManifestCheck> {
         None => Vec::new(),
     };
     let source = meta.get("source").cloned().unwrap_or_default();
-    match manifest::from_str(&source, &format!("{name} (stored source)"), &overrides) {
+    match experiment::from_str(&source, &format!("{name} (stored source)"), &overrides) {
         Ok(from_source) if from_source.hash_hex == *recorded => {}
         Ok(from_source) => {
             return Err(ManifestCheck::Mismatch(format!(

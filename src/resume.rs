@@ -6,7 +6,7 @@
 //! continues from), and the time loop goes on with its output schedules positioned after
 //! the restored time. So the checkpoint hashes equal those of an uninterrupted run.
 use crate::checkpoint;
-use crate::manifest::Resolved;
+use crate::experiment::Resolved;
 use crate::proto::mps::v1::{CheckpointHash, StateCheckpoint};
 use crate::record::{Recorder, partial_path, read_run};
 use crate::restore::{Logged, is_scheduled, manifest_of, read_messages, restore_solver};

@@ -3,16 +3,12 @@
 //! `mps/` does one step of the method; this module owns the process around it (output
 //! schedule, diagnostics, checkpoints, stop conditions, outcome).
 use crate::checkpoint;
-use crate::manifest::{
-    Fluid, Manifest, PpePreconditioner, PpeSource, Resolved, Scene as SceneSpec,
-};
-use crate::mps::{
-    MovingWall, ParticleKind, Particles, Rheology, Solver, SolverConfig, SourceTerm, StageTimes,
-};
+use crate::experiment::{Manifest, Resolved, Scene, build_scene, experiment_metrics};
+use crate::manifest::{Fluid, PpePreconditioner, PpeSource};
+use crate::mps::{ParticleKind, Rheology, Solver, SolverConfig, SourceTerm, StageTimes};
 use crate::proto::foxglove::PointCloud;
 use crate::proto::mps::v1::{CheckpointHash, Diagnostics, StateCheckpoint, Summary};
 use crate::record::{Outcome, RecordError, Recorder, RunHeader, point_cloud};
-use crate::scene::{self, Scene};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -108,115 +104,6 @@ pub fn run_header(resolved: &Resolved, threads: usize) -> RunHeader<'_> {
     }
 }
 
-/// Builds the scene a manifest describes.
-pub fn build_scene<const D: usize>(m: &Manifest) -> Scene<D> {
-    match &m.scene {
-        SceneSpec::DamBreak {
-            tank_width_m,
-            tank_height_m,
-            tank_depth_m,
-            column_width_m,
-            column_height_m,
-        } => scene::dam_break::build::<D>(
-            &scene::dam_break::DamBreak {
-                tank_width_m: *tank_width_m,
-                tank_height_m: *tank_height_m,
-                tank_depth_m: *tank_depth_m,
-                column_width_m: *column_width_m,
-                column_height_m: *column_height_m,
-            },
-            m.spacing_m,
-            m.mps.wall_layers,
-            m.mps.dummy_layers,
-        ),
-        SceneSpec::Slump { lift_speed_m_s, .. } => scene::slump::build::<D>(
-            &slump_spec(&m.scene).expect("slump scene"),
-            m.spacing_m,
-            m.mps.wall_layers,
-            m.mps.dummy_layers,
-            *lift_speed_m_s > 0.0,
-        ),
-        SceneSpec::LFlow { .. } => scene::l_flow::build::<D>(
-            &l_flow_spec(&m.scene).expect("l_flow scene"),
-            m.spacing_m,
-            m.mps.wall_layers,
-            m.mps.dummy_layers,
-        ),
-    }
-}
-
-fn l_flow_spec(s: &SceneSpec) -> Option<scene::l_flow::LFlow> {
-    match *s {
-        SceneSpec::LFlow {
-            vertical_width_m,
-            vertical_height_m,
-            channel_length_m,
-            channel_height_m,
-            fill_height_m,
-            depth_m,
-        } => Some(scene::l_flow::LFlow {
-            vertical_width_m,
-            vertical_height_m,
-            channel_length_m,
-            channel_height_m,
-            fill_height_m,
-            depth_m,
-        }),
-        _ => None,
-    }
-}
-
-pub(crate) fn slump_spec(s: &SceneSpec) -> Option<scene::slump::Slump> {
-    match *s {
-        SceneSpec::Slump {
-            cone_height_m,
-            cone_bottom_diameter_m,
-            cone_top_diameter_m,
-            plate_size_m,
-            ..
-        } => Some(scene::slump::Slump {
-            cone_height_m,
-            cone_bottom_diameter_m,
-            cone_top_diameter_m,
-            plate_size_m,
-        }),
-        _ => None,
-    }
-}
-
-/// The wall the solver moves: the slump cone, lifted as the manifest says.
-fn moving_wall<const D: usize>(m: &Manifest, scene: &Scene<D>) -> Option<MovingWall> {
-    let range = scene.moving.clone()?;
-    match m.scene {
-        SceneSpec::Slump {
-            lift_speed_m_s,
-            lift_start_s,
-            lift_height_m,
-            ..
-        } => Some(MovingWall {
-            first: range.start,
-            end: range.end,
-            start_s: lift_start_s,
-            speed_m_s: lift_speed_m_s,
-            travel_m: lift_height_m,
-        }),
-        _ => None,
-    }
-}
-
-/// Yield stress of the fluid (0 for a Newtonian one).
-pub(crate) fn yield_stress_pa(fluid: &Fluid) -> f64 {
-    match *fluid {
-        Fluid::Newtonian { .. } => 0.0,
-        Fluid::Bingham {
-            yield_stress_pa, ..
-        }
-        | Fluid::BiViscosity {
-            yield_stress_pa, ..
-        } => yield_stress_pa,
-    }
-}
-
 /// The rheology a manifest's fluid section describes, and whether eq. 8's term is on.
 pub fn rheology(fluid: &Fluid) -> (Rheology, bool) {
     match *fluid {
@@ -288,96 +175,7 @@ pub fn solver_config<const D: usize>(m: &Manifest, scene: &Scene<D>) -> SolverCo
         max_speed_m_s: m.stop.max_speed_m_s,
         domain_min_m: scene.domain_min_m,
         domain_max_m: scene.domain_max_m,
-        moving_wall: moving_wall(m, scene),
-    }
-}
-
-/// Metrics of the experiment at the current state (documented in the README).
-pub fn experiment_metrics<const D: usize>(
-    m: &Manifest,
-    particles: &Particles<D>,
-) -> BTreeMap<String, f64> {
-    let mut out = BTreeMap::new();
-    out.insert(
-        "front_position_m".to_string(),
-        scene::front_position_m(particles, m.spacing_m),
-    );
-    if let Some(spec) = l_flow_spec(&m.scene) {
-        out.insert(
-            "l_flow_value_m".to_string(),
-            scene::l_flow::l_flow_value_m(particles, &spec, m.spacing_m),
-        );
-    }
-    if slump_spec(&m.scene).is_some() {
-        slump_metrics(m, particles, &mut out);
-    }
-    out
-}
-
-/// Names of the metrics that [`experiment_metrics`] gives for this manifest (without a
-/// scene to measure): its keys for an empty particle set, since which metrics exist depends
-/// on the manifest alone.
-pub fn metric_names(m: &Manifest) -> Vec<String> {
-    if m.dimension == 3 {
-        experiment_metrics(m, &Particles::<3>::default())
-            .into_keys()
-            .collect()
-    } else {
-        experiment_metrics(m, &Particles::<2>::default())
-            .into_keys()
-            .collect()
-    }
-}
-
-/// Slump-flow metrics (README, *Experiment manifests*): spread radius over the octants, the
-/// height at the centre, and the Roussel & Coussot closed forms for the fluid's volume.
-fn slump_metrics<const D: usize>(
-    m: &Manifest,
-    particles: &Particles<D>,
-    out: &mut BTreeMap<String, f64>,
-) {
-    use scene::slump;
-    let l0 = m.spacing_m;
-    let Some(spec) = slump_spec(&m.scene) else {
-        return;
-    };
-    // Fluid lifted above the cone's height (stuck to its wall) is not part of the pancake.
-    let z_max = spec.cone_height_m;
-    let radii = slump::spread_radii_m(particles, l0, z_max);
-    let mean = radii.iter().sum::<f64>() / radii.len() as f64;
-    let min = radii.iter().copied().fold(f64::INFINITY, f64::min);
-    let max = radii.iter().copied().fold(0.0, f64::max);
-    out.insert("spread_radius_mean_m".into(), mean);
-    out.insert("spread_radius_min_m".into(), min);
-    out.insert("spread_radius_max_m".into(), max);
-    out.insert("spread_diameter_m".into(), 2.0 * mean);
-    out.insert(
-        "centre_height_m".into(),
-        slump::surface_height_m(particles, l0, 0.0, 1.5 * l0, z_max),
-    );
-    let tau = yield_stress_pa(&m.fluid);
-    if tau > 0.0 {
-        let (rho, g) = (m.fluid.density_kg_m3(), m.gravity_m_s2);
-        let on_plate = (0..particles.len())
-            .filter(|&i| slump::on_plate(particles, i, z_max))
-            .count();
-        out.insert("fluid_on_plate_count".into(), on_plate as f64);
-        let volume = on_plate as f64 * l0.powi(D as i32);
-        let radius = slump::closed_form_radius_m(rho, g, volume, tau);
-        out.insert("closed_form_radius_m".into(), radius);
-        // The surface at rest at a quarter, half and three quarters of the measured mean
-        // radius, against h(r) = sqrt(2 tau_0 (R - r)/(rho g)) with R the measured radius.
-        for (name, share) in [("r25", 0.25), ("r50", 0.5), ("r75", 0.75)] {
-            let r = share * mean;
-            out.insert(
-                format!("surface_height_{name}_m"),
-                slump::surface_height_m(particles, l0, r, l0, z_max),
-            );
-            out.insert(
-                format!("closed_form_height_{name}_m"),
-                slump::closed_form_height_m(rho, g, tau, mean, r),
-            );
-        }
+        moving_wall: scene.moving_wall.clone(),
     }
 }
 

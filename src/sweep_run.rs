@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-use crate::manifest::sweep::Sweep;
+use crate::experiment::Sweep;
 use crate::run::{RunError, RunOptions, RunResult, run};
 
 /// How to run a sweep.

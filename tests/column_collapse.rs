@@ -2,7 +2,8 @@
 //! theory (DESIGN.md section 5): L = (3A/2)^(2/3) (rho g / (2 tau_y))^(1/3) and
 //! h(d) = sqrt(2 tau_y d / (rho g)) at a distance d back from the front.
 mod common;
-use mps_runner::manifest::{Fluid, Scene};
+use mps_runner::experiment::SceneSpec;
+use mps_runner::manifest::Fluid;
 use mps_runner::record::{Outcome, read_run};
 
 #[test]
@@ -26,14 +27,11 @@ fn bingham_heap_matches_lubrication_closed_form() {
     else {
         panic!("column collapse is a Bingham fluid")
     };
-    let Scene::DamBreak {
-        column_width_m,
-        column_height_m,
-        ..
-    } = m.scene
-    else {
-        panic!("column collapse uses the dam_break geometry")
+    let SceneSpec::ColumnCollapse(ref collapse) = m.scene else {
+        panic!("column_collapse_2d is a column collapse")
     };
+    let (column_width_m, column_height_m) =
+        (collapse.tank.column_width_m, collapse.tank.column_height_m);
     let g = m.gravity_m_s2;
     let area = column_width_m * column_height_m;
     let length = (1.5 * area).powf(2.0 / 3.0) * (rho * g / (2.0 * tau)).powf(1.0 / 3.0);

@@ -41,7 +41,7 @@ fn surge_front_follows_martin_and_moyce() {
     let m = &resolved.manifest;
     let a_m = 0.25;
     assert!(
-        matches!(&m.scene, mps_runner::manifest::Scene::DamBreak { column_width_m, column_height_m, .. }
+        matches!(&m.scene, mps_runner::experiment::SceneSpec::DamBreak(mps_runner::experiment::dam_break::DamBreak { column_width_m, column_height_m, .. })
         if *column_width_m == a_m && *column_height_m == 2.0 * a_m)
     );
     let dir = tempfile::tempdir().unwrap();

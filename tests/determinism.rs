@@ -102,8 +102,9 @@ fn reused_neighbour_lists_change_no_bit() {
     // Verlet lists (rebuilt only after half a skin of motion) against fresh lists at every
     // stage: the lists are in index order and far pairs are skipped, so the bits must agree.
     use mps_runner::checkpoint::to_message;
+    use mps_runner::experiment::build_scene;
     use mps_runner::mps::Solver;
-    use mps_runner::run::{build_scene, solver_config};
+    use mps_runner::run::solver_config;
     let resolved = common::resolve("smoke_2d.yaml", &[]);
     let m = &resolved.manifest;
     let run = |fresh: bool| {

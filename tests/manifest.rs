@@ -4,7 +4,10 @@ use std::path::Path;
 
 mod common;
 
-use mps_runner::manifest::{self, Fluid, ManifestError, Resolved, Scene};
+use mps_runner::experiment;
+use mps_runner::experiment::dam_break::DamBreak;
+use mps_runner::experiment::{Resolved, SceneSpec};
+use mps_runner::manifest::{self, Fluid, ManifestError};
 
 /// A manifest with every field written out (values as in experiments/dam_break_2d.yaml).
 const FULL: &str = "\
@@ -70,7 +73,7 @@ fn ok(text: &str) -> Resolved {
 
 fn ok_with(text: &str, overrides: &[&str]) -> Resolved {
     let overrides: Vec<String> = overrides.iter().map(|s| s.to_string()).collect();
-    match manifest::from_str(text, "exp.yaml", &overrides) {
+    match experiment::from_str(text, "exp.yaml", &overrides) {
         Ok(r) => r,
         Err(e) => panic!("expected success, got: {e}"),
     }
@@ -82,7 +85,7 @@ fn err(text: &str) -> ManifestError {
 
 fn err_with(text: &str, overrides: &[&str]) -> ManifestError {
     let overrides: Vec<String> = overrides.iter().map(|s| s.to_string()).collect();
-    match manifest::from_str(text, "exp.yaml", &overrides) {
+    match experiment::from_str(text, "exp.yaml", &overrides) {
         Ok(r) => panic!("expected an error, got a manifest: {}", r.canonical),
         Err(e) => e,
     }
@@ -136,13 +139,13 @@ fn full_manifest_parses_and_defaults_are_filled() {
     assert_eq!(d.mps.dummy_layers, 2);
     assert_eq!(
         d.scene,
-        Scene::DamBreak {
+        SceneSpec::DamBreak(DamBreak {
             tank_width_m: 1.0,
             tank_height_m: 0.6,
             tank_depth_m: 0.1,
             column_width_m: 0.25,
             column_height_m: 0.5
-        }
+        })
     );
     assert_eq!(d.output, manifest::Output::default());
     assert_eq!(d.output.cloud_interval_s, 0.02);
@@ -225,7 +228,7 @@ fn canonical_text_round_trips() {
 #[test]
 fn example_files_parse() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let d = manifest::load(&root.join("experiments/dam_break_2d.yaml"), &[]).unwrap();
+    let d = experiment::load(&root.join("experiments/dam_break_2d.yaml"), &[]).unwrap();
     let m = &d.manifest;
     assert_eq!(m.name, "dam_break_2d");
     assert_eq!(m.dimension, 2);
@@ -245,19 +248,19 @@ fn example_files_parse() {
     assert_eq!(d.manifest, full.manifest);
     assert_eq!(d.hash_hex, full.hash_hex);
 
-    let s = manifest::load(&root.join("experiments/smoke_2d.yaml"), &[]).unwrap();
+    let s = experiment::load(&root.join("experiments/smoke_2d.yaml"), &[]).unwrap();
     let m = &s.manifest;
     assert_eq!(m.name, "smoke_2d");
     assert_eq!(m.spacing_m, 0.025);
     assert_eq!(m.time.end_s, 0.1);
     assert_eq!(m.output.checkpoint_interval_s, 0.02);
-    let Scene::DamBreak {
+    let SceneSpec::DamBreak(DamBreak {
         tank_width_m,
         tank_height_m,
         column_width_m,
         column_height_m,
         ..
-    } = m.scene
+    }) = m.scene
     else {
         panic!("smoke_2d is a dam break")
     };
@@ -787,7 +790,7 @@ fn yaml_errors() {
 
 #[test]
 fn io_error_names_the_path() {
-    let e = manifest::load(Path::new("/nonexistent/exp.yaml"), &[]).unwrap_err();
+    let e = experiment::load(Path::new("/nonexistent/exp.yaml"), &[]).unwrap_err();
     assert!(matches!(e, ManifestError::Io { .. }));
     assert!(e.to_string().starts_with("/nonexistent/exp.yaml: "), "{e}");
 }
@@ -801,7 +804,7 @@ fn load_names_the_file_in_errors() {
         edit(MINIMAL, "  end_s: 1\n", "  end_s: 1\n  courant: 1.5\n"),
     )
     .unwrap();
-    let e = manifest::load(&path, &[]).unwrap_err();
+    let e = experiment::load(&path, &[]).unwrap_err();
     assert_eq!(
         e.to_string(),
         format!(
@@ -834,7 +837,7 @@ fn aliases_and_flow_style_are_located() {
 fn variant_can_be_selected_by_override() {
     // same variant: the section's other values stay
     let r = ok_with(MINIMAL, &["scene.kind=dam_break", "scene.tank_width_m=2"]);
-    let Scene::DamBreak { tank_width_m, .. } = r.manifest.scene else {
+    let SceneSpec::DamBreak(DamBreak { tank_width_m, .. }) = r.manifest.scene else {
         panic!("a dam break")
     };
     assert_eq!(tank_width_m, 2.0);
@@ -866,25 +869,25 @@ fn metric_names_are_the_metrics_each_experiment_reports() {
     // The names validation accepts for stop.rest_metric are exactly the keys measured.
     for entry in std::fs::read_dir(common::root().join("experiments")).unwrap() {
         let path = entry.unwrap().path();
-        let Ok(mps_runner::manifest::sweep::Plan::Single(r)) =
-            mps_runner::manifest::sweep::load_plan(&path, &[])
+        let Ok(mps_runner::experiment::Plan::Single(r)) =
+            mps_runner::experiment::load_plan(&path, &[])
         else {
             continue;
         };
         let m = &r.manifest;
         let measured: Vec<String> = if m.dimension == 2 {
-            let scene = mps_runner::run::build_scene::<2>(m);
-            mps_runner::run::experiment_metrics(m, &scene.particles)
+            let scene = mps_runner::experiment::build_scene::<2>(m);
+            mps_runner::experiment::experiment_metrics(m, &scene.particles)
                 .into_keys()
                 .collect()
         } else {
-            let scene = mps_runner::run::build_scene::<3>(m);
-            mps_runner::run::experiment_metrics(m, &scene.particles)
+            let scene = mps_runner::experiment::build_scene::<3>(m);
+            mps_runner::experiment::experiment_metrics(m, &scene.particles)
                 .into_keys()
                 .collect()
         };
         assert_eq!(
-            mps_runner::run::metric_names(m),
+            mps_runner::experiment::metric_names(m),
             measured,
             "{}",
             path.display()
@@ -897,7 +900,7 @@ fn experiment_hashes_stay_what_they_were() {
     // `runner verify` re-canonicalises a file's stored manifest and checks its hash: a change
     // of the canonical form (a new key written for every manifest) would make every file
     // written before it unverifiable. smoke_2d's hash as of the first release of the format.
-    let r = manifest::load(&common::experiment("smoke_2d.yaml"), &[]).unwrap();
+    let r = experiment::load(&common::experiment("smoke_2d.yaml"), &[]).unwrap();
     assert_eq!(
         r.hash_hex,
         "e549f3f34509373b7baaa9c1ed88d53c111b9c220bbecc9e585706f7f4de0a13"
@@ -905,7 +908,7 @@ fn experiment_hashes_stay_what_they_were() {
     assert!(!r.canonical.contains("rest_"), "{}", r.canonical);
     // With a rest metric the rest settings are part of the experiment.
     let sets = ["stop.rest_metric=front_position_m".to_string()];
-    let r = manifest::load(&common::experiment("smoke_2d.yaml"), &sets).unwrap();
+    let r = experiment::load(&common::experiment("smoke_2d.yaml"), &sets).unwrap();
     assert!(
         r.canonical.contains("\"rest_after_s\":0.5"),
         "{}",

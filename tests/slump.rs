@@ -1,10 +1,10 @@
 //! Slump-flow test, 3D (seed 004): scene geometry, the cone lift, determinism in 3D and a
 //! coarse check of the final spread against the closed form of Roussel & Coussot (2005).
 mod common;
+use mps_runner::experiment::build_scene;
+use mps_runner::experiment::slump;
 use mps_runner::mps::ParticleKind;
 use mps_runner::record::{Outcome, read_run};
-use mps_runner::run::build_scene;
-use mps_runner::scene::slump;
 use mps_runner::verify::{VerifyOptions, verify};
 
 const FRUSTUM_L: f64 = 5.497_787_143_782_138; // pi 0.3 (0.1^2 + 0.1 0.05 + 0.05^2) / 3, in L
@@ -15,6 +15,7 @@ fn spec() -> slump::Slump {
         cone_bottom_diameter_m: 0.2,
         cone_top_diameter_m: 0.1,
         plate_size_m: 0.9,
+        ..slump::Slump::default()
     }
 }
 
@@ -25,7 +26,7 @@ fn frustum_volume_is_5_5_litres() {
 
 #[test]
 fn two_dimensions_are_rejected() {
-    let err = mps_runner::manifest::load(
+    let err = mps_runner::experiment::load(
         &common::experiment("slump_3d.yaml"),
         &["dimension=2".to_string()],
     )
@@ -53,7 +54,11 @@ fn scene_geometry() {
             "l0 = {l0}: {n} particles, {volume_l} L"
         );
         // Every fluid particle is inside the frustum, and symmetric under x -> -x.
-        let cone = scene.moving.clone().expect("a cone");
+        let cone = scene
+            .moving_wall
+            .clone()
+            .map(|w| w.first..w.end)
+            .expect("a cone");
         for i in 0..p.len() {
             let x = p.position_m[i];
             let r = (x[0] * x[0] + x[1] * x[1]).sqrt();
@@ -92,7 +97,7 @@ fn scene_geometry() {
         &["spacing_m=0.025", "scene.lift_speed_m_s=0"],
     )
     .manifest;
-    assert!(build_scene::<3>(&m).moving.is_none());
+    assert!(build_scene::<3>(&m).moving_wall.is_none());
 }
 
 /// The cone holds the fluid until the lift starts, then rises at the lift speed; a replay
@@ -111,7 +116,7 @@ fn cone_lifts_at_its_speed_and_holds_the_fluid_before() {
     );
     let m = &resolved.manifest;
     let start = build_scene::<3>(m);
-    let cone = start.moving.clone().unwrap();
+    let cone = start.moving_wall.clone().map(|w| w.first..w.end).unwrap();
     let dir = tempfile::tempdir().unwrap();
     let result = common::run_in(&resolved, dir.path(), 2);
     assert_eq!(

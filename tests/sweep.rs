@@ -1,8 +1,9 @@
 //! Sweeps (`sweep:` manifests) and the SVG reports.
 mod common;
 use assert_cmd::Command;
-use mps_runner::manifest::sweep::{Plan, Sweep, plan_from_str};
-use mps_runner::manifest::{self, ManifestError};
+use mps_runner::experiment;
+use mps_runner::experiment::{Plan, Sweep, plan_from_str};
+use mps_runner::manifest::ManifestError;
 use mps_runner::record::read_run;
 use mps_runner::report;
 use mps_runner::sweep_run::{SweepOptions, run_sweep};
@@ -38,7 +39,7 @@ const TWO_AXES: &str =
 #[test]
 fn no_sweep_section_is_a_single_plan_equal_to_load() {
     let plan = plan_from_str(&smoke_text(), "x", &sets(&["time.end_s=0.05"])).unwrap();
-    let plain = manifest::from_str(&smoke_text(), "x", &sets(&["time.end_s=0.05"])).unwrap();
+    let plain = experiment::from_str(&smoke_text(), "x", &sets(&["time.end_s=0.05"])).unwrap();
     assert_eq!(plan, Plan::Single(Box::new(plain)));
 }
 
@@ -81,14 +82,14 @@ fn each_point_equals_the_plain_manifest_with_sets() {
     for p in &s.points {
         let mut o = vec!["time.end_s=0.05".to_string()];
         o.extend(p.assignments.iter().map(|(k, v)| format!("{k}={v}")));
-        let plain = manifest::load(&common::experiment("smoke_2d.yaml"), &o).unwrap();
+        let plain = experiment::load(&common::experiment("smoke_2d.yaml"), &o).unwrap();
         assert_eq!(p.resolved.canonical, plain.canonical);
         assert_eq!(p.resolved.hash_hex, plain.hash_hex);
         assert!(!p.resolved.canonical.contains("sweep"));
         // The recorded source and overrides reproduce the point.
         assert_eq!(p.resolved.source_text, text);
         assert_eq!(p.resolved.overrides, o);
-        let again = manifest::from_str(&text, "again", &o).unwrap();
+        let again = experiment::from_str(&text, "again", &o).unwrap();
         assert_eq!(again.hash_hex, p.resolved.hash_hex);
     }
     // Hashes are all distinct; the sweep hash ignores comments and spelling (5 vs 5.0).
@@ -245,7 +246,7 @@ fn sweep_runs_equal_single_runs_and_are_plotted() {
     for p in &s.points {
         let mut o = vec!["time.end_s=0.04".to_string()];
         o.extend(p.assignments.iter().map(|(k, v)| format!("{k}={v}")));
-        let plain = manifest::load(&common::experiment("smoke_2d.yaml"), &o).unwrap();
+        let plain = experiment::load(&common::experiment("smoke_2d.yaml"), &o).unwrap();
         let single = common::run_in(&plain, &single_dir, 2);
         let file = folder.join(format!("smoke_2d-{}.mcap", plain.short_hash()));
         let swept = read_run(&file).unwrap().summary.unwrap();
@@ -446,7 +447,7 @@ fn only_the_points_need_to_be_valid() {
     // The file's own end time is invalid; every point overrides it.
     let text =
         with_section("sweep:\n  time.end_s: [0.01, 0.02]\n").replace("end_s: 0.1", "end_s: -1");
-    assert!(manifest::from_str(&text, "x", &[]).is_err());
+    assert!(experiment::from_str(&text, "x", &[]).is_err());
     assert_eq!(sweep_of(&text, &[]).points.len(), 2);
     // A YAML syntax error still has its usual location.
     let e = sweep_err(&with_section("sweep:\n  gravity_m_s2: [1, 2\n"), &[]);

@@ -3,6 +3,7 @@
 //! manifest), 3 simulation failed, 130 interrupted. `runner verify`: 0 identical, 1 not, 2 the
 //! file cannot be used.
 use clap::{Parser, Subcommand};
+use mps_runner::experiment;
 use mps_runner::manifest::sweep;
 use mps_runner::record::Outcome;
 use mps_runner::report;
@@ -181,7 +182,7 @@ fn main() -> ExitCode {
             manifest: path,
             set,
             canonical,
-        }) => match sweep::load_plan(&path, &set) {
+        }) => match experiment::load_plan(&path, &set) {
             Ok(sweep::Plan::Single(resolved)) => {
                 if canonical {
                     println!("{}", resolved.canonical);
@@ -410,7 +411,7 @@ fn bench_command(
         eprintln!("error: --threads must be at least 1");
         return ExitCode::from(EXIT_BAD_INPUT);
     }
-    let resolved = match sweep::load_plan(path, set) {
+    let resolved = match experiment::load_plan(path, set) {
         Ok(sweep::Plan::Single(r)) => *r,
         Ok(sweep::Plan::Sweep(_)) => {
             eprintln!("error: runner bench takes a single experiment, not a sweep");
@@ -520,7 +521,7 @@ fn run_command(args: RunArgs) -> ExitCode {
         eprintln!("error: --threads must be at least 1");
         return ExitCode::from(EXIT_BAD_INPUT);
     }
-    let resolved = match sweep::load_plan(&path, &args.set) {
+    let resolved = match experiment::load_plan(&path, &args.set) {
         Ok(sweep::Plan::Single(r)) => *r,
         Ok(sweep::Plan::Sweep(s)) => return sweep_command(&s, &args),
         Err(e) => {
@@ -579,7 +580,7 @@ fn run_command(args: RunArgs) -> ExitCode {
 /// concurrent points), prints one line per finished point, plots the results into the sweep
 /// folder, and prints the folder last. Exit 0 when every point completed, 3 when any failed,
 /// 1 when a file could not be written, 130 when interrupted.
-fn sweep_command(s: &sweep::Sweep, args: &RunArgs) -> ExitCode {
+fn sweep_command(s: &experiment::Sweep, args: &RunArgs) -> ExitCode {
     let total = s.points.len();
     if !args.quiet {
         eprintln!(

@@ -12,7 +12,7 @@
 use serde_json::Value;
 use sha2::{Digest, Sha256};
 
-use super::types::{Manifest, PpePreconditioner};
+use super::types::{Manifest, PpePreconditioner, SceneSection};
 
 /// Replace every `-0.0` in `value` by `0.0`.
 pub fn normalise_negative_zero(value: &mut Value) {
@@ -28,7 +28,7 @@ pub fn normalise_negative_zero(value: &mut Value) {
 }
 
 /// The canonical JSON text of `manifest`.
-pub fn canonical_text(manifest: &Manifest) -> String {
+pub fn canonical_text<S: SceneSection>(manifest: &Manifest<S>) -> String {
     let mut value = serde_json::to_value(manifest).expect("a manifest always serializes to JSON");
     normalise_negative_zero(&mut value);
     if manifest.mps.ppe_preconditioner == PpePreconditioner::Jacobi

@@ -25,16 +25,18 @@ use std::collections::BTreeSet;
 use std::path::Path;
 
 pub use error::{ManifestError, Result};
-pub use types::{Fluid, Manifest, Mps, Output, PpePreconditioner, PpeSource, Scene, Stop, Time};
+pub use types::{
+    Fluid, Manifest, Mps, Output, PpePreconditioner, PpeSource, SceneSection, Stop, Time,
+};
 
 use locate::{Pos, SourceMap};
 use overrides::Touched;
 
 /// A manifest loaded, overridden, validated and hashed.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Resolved {
+pub struct Resolved<S> {
     /// The fully resolved manifest.
-    pub manifest: Manifest,
+    pub manifest: Manifest<S>,
     /// The manifest file text as written.
     pub source_text: String,
     /// The `--set KEY=VALUE` strings applied, in order.
@@ -45,7 +47,7 @@ pub struct Resolved {
     pub hash_hex: String,
 }
 
-impl Resolved {
+impl<S> Resolved<S> {
     /// The first 12 hex digits of the hash (for file names).
     pub fn short_hash(&self) -> &str {
         &self.hash_hex[..12]
@@ -54,7 +56,7 @@ impl Resolved {
 
 /// Read the manifest at `path`, apply `overrides` (`KEY=VALUE`), validate and hash it.
 /// Errors name the file as `path` was given.
-pub fn load(path: &Path, overrides: &[String]) -> Result<Resolved> {
+pub fn load<S: SceneSection>(path: &Path, overrides: &[String]) -> Result<Resolved<S>> {
     let text = std::fs::read_to_string(path).map_err(|source| ManifestError::Io {
         path: path.to_path_buf(),
         source,
@@ -65,11 +67,15 @@ pub fn load(path: &Path, overrides: &[String]) -> Result<Resolved> {
 /// Like [`load`], from text; `source_name` is used in error messages.
 /// A top-level `sweep` section is ignored here (blanked out, see [`sweep`]); `source_text`
 /// keeps it.
-pub fn from_str(text: &str, source_name: &str, overrides: &[String]) -> Result<Resolved> {
+pub fn from_str<S: SceneSection>(
+    text: &str,
+    source_name: &str,
+    overrides: &[String],
+) -> Result<Resolved<S>> {
     let full_text = text;
     let text: &str = &sweep::strip(full_text);
-    let parsed: Manifest = serde_saphyr::from_str_with_options(text, yaml_options())
-        .map_err(|e| syntax_error(&e, source_name, text))?;
+    let parsed: Manifest<S> = serde_saphyr::from_str_with_options(text, yaml_options())
+        .map_err(|e| syntax_error::<S>(&e, source_name, text))?;
 
     // JSON has no NaN or infinity: catch them before the manifest becomes JSON.
     let map = SourceMap::build(text);
@@ -87,7 +93,7 @@ pub fn from_str(text: &str, source_name: &str, overrides: &[String]) -> Result<R
     let mut value = serde_json::to_value(&parsed).expect("a manifest always serializes to JSON");
     let mut touched = Touched::default();
     for raw in overrides {
-        overrides::apply(&mut value, raw, &mut touched)?;
+        overrides::apply::<S>(&mut value, raw, &mut touched)?;
     }
     canonical::normalise_negative_zero(&mut value);
     let manifest = rebuild(&value, overrides)?;
@@ -134,10 +140,13 @@ fn yaml_options() -> serde_saphyr::Options {
 /// Turn the (overridden) JSON value back into a typed manifest. The value goes through
 /// pretty JSON text and serde-saphyr, so that a type error has a location, which gives its
 /// field path, which names the override responsible.
-fn rebuild(value: &serde_json::Value, overrides: &[String]) -> Result<Manifest> {
+fn rebuild<S: SceneSection>(
+    value: &serde_json::Value,
+    overrides: &[String],
+) -> Result<Manifest<S>> {
     let text = serde_json::to_string_pretty(value).expect("a JSON value always serializes");
     serde_saphyr::from_str_with_options(&text, yaml_options()).map_err(|e| {
-        let Described { field, message, .. } = describe(&e, &SourceMap::build(&text));
+        let Described { field, message, .. } = describe::<S>(&e, &SourceMap::build(&text));
         let keys: Vec<&str> = overrides
             .iter()
             .filter_map(|o| overrides::split(o).ok().map(|(k, _)| k))
@@ -172,9 +181,13 @@ fn parent(path: &str) -> &str {
 }
 
 /// A serde-saphyr error as `ManifestError::Syntax`.
-fn syntax_error(e: &serde_saphyr::Error, source_name: &str, text: &str) -> ManifestError {
+fn syntax_error<S: SceneSection>(
+    e: &serde_saphyr::Error,
+    source_name: &str,
+    text: &str,
+) -> ManifestError {
     let map = SourceMap::build(text);
-    let d = describe(e, &map);
+    let d = describe::<S>(e, &map);
     ManifestError::Syntax {
         source_name: source_name.to_string(),
         line: d.pos.map(|p| p.line),
@@ -194,7 +207,7 @@ fn inner(e: &serde_saphyr::Error) -> &serde_saphyr::Error {
 }
 
 /// Every field path of the manifest schema (sections included).
-fn schema_paths() -> BTreeSet<String> {
+fn schema_paths<S: SceneSection>() -> BTreeSet<String> {
     fn collect(v: &serde_json::Value, prefix: &str, out: &mut BTreeSet<String>) {
         if let serde_json::Value::Object(map) = v {
             for (k, child) in map {
@@ -205,7 +218,7 @@ fn schema_paths() -> BTreeSet<String> {
         }
     }
     let mut out = BTreeSet::new();
-    for m in types::samples() {
+    for m in types::samples::<S>() {
         collect(&serde_json::to_value(m).expect("serializes"), "", &mut out);
     }
     out
@@ -234,7 +247,7 @@ struct Described {
 /// Field path (found from the error's location: serde-saphyr reports a struct's missing
 /// field at its last key, and errors inside internally tagged enums at the enum's key),
 /// location and message of a serde-saphyr error.
-fn describe(e: &serde_saphyr::Error, map: &SourceMap) -> Described {
+fn describe<S: SceneSection>(e: &serde_saphyr::Error, map: &SourceMap) -> Described {
     use serde_saphyr::Error as E;
     let e = inner(e);
     let mut pos = e.location().filter(|l| l.line() > 0).map(|l| Pos {
@@ -281,7 +294,7 @@ fn describe(e: &serde_saphyr::Error, map: &SourceMap) -> Described {
         }
         E::SerdeMissingField { field, .. } => {
             let k = at.clone().unwrap_or_default();
-            let schema = schema_paths();
+            let schema = schema_paths::<S>();
             let path = ancestors(&k)
                 .map(|s| join(s, field))
                 .find(|p| schema.contains(p))

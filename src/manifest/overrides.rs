@@ -12,7 +12,7 @@ use std::collections::BTreeSet;
 use serde_json::{Map, Value};
 
 use super::error::{ManifestError, Result};
-use super::types::{Fluid, Scene};
+use super::types::{Fluid, SceneSection};
 
 /// Sections that are internally tagged enums: (path, tag key).
 pub const TAGGED_SECTIONS: &[(&str, &str)] = &[("fluid", "model"), ("scene", "kind")];
@@ -95,7 +95,7 @@ fn keys_of(map: &Map<String, Value>) -> String {
 }
 
 /// Apply one `KEY=VALUE` override to `root`.
-pub fn apply(root: &mut Value, raw: &str, touched: &mut Touched) -> Result<()> {
+pub fn apply<S: SceneSection>(root: &mut Value, raw: &str, touched: &mut Touched) -> Result<()> {
     let (key, raw_value) = split(raw)?;
     let mut new = parse_scalar(key, raw_value)?;
     let segs: Vec<&str> = key.split('.').collect();
@@ -153,7 +153,7 @@ pub fn apply(root: &mut Value, raw: &str, touched: &mut Touched) -> Result<()> {
                 let Value::String(variant) = &new else {
                     return Err(err(key, format!("expected a variant name, got {new}")));
                 };
-                let defaults = variant_defaults(&here, seg, variant);
+                let defaults = variant_defaults::<S>(&here, seg, variant);
                 if defaults.as_object().is_some_and(|m| m.len() == 1) {
                     touched.open.insert(here.clone());
                 }
@@ -186,7 +186,7 @@ fn is_below(path: &str, section: &str) -> bool {
 /// The serialized defaults of variant `variant` of the tagged section at `section`, or just
 /// `{tag: variant}` when the variant has required fields (or is unknown: the error comes when
 /// the manifest is rebuilt, naming the valid variants).
-fn variant_defaults(section: &str, tag: &str, variant: &str) -> Value {
+fn variant_defaults<S: SceneSection>(section: &str, tag: &str, variant: &str) -> Value {
     let mut bare = Map::new();
     bare.insert(tag.to_string(), Value::String(variant.to_string()));
     let bare = Value::Object(bare);
@@ -194,7 +194,7 @@ fn variant_defaults(section: &str, tag: &str, variant: &str) -> Value {
         "fluid" => serde_json::from_value::<Fluid>(bare.clone())
             .ok()
             .and_then(|f| serde_json::to_value(f).ok()),
-        "scene" => serde_json::from_value::<Scene>(bare.clone())
+        "scene" => serde_json::from_value::<S>(bare.clone())
             .ok()
             .and_then(|s| serde_json::to_value(s).ok()),
         _ => None,

@@ -32,7 +32,7 @@ use serde_json::Value;
 
 use super::error::{ManifestError, Result};
 use super::locate::{Pos, SourceMap};
-use super::{Resolved, canonical, from_str};
+use super::{Resolved, SceneSection, canonical, from_str};
 
 /// The top-level key of the sweep section.
 pub const SWEEP_KEY: &str = "sweep";
@@ -42,9 +42,9 @@ pub const MAX_POINTS: usize = 10_000;
 
 /// What a manifest file describes: one run, or a sweep of runs.
 #[derive(Debug, Clone, PartialEq)]
-pub enum Plan {
-    Single(Box<Resolved>),
-    Sweep(Sweep),
+pub enum Plan<S> {
+    Single(Box<Resolved<S>>),
+    Sweep(Sweep<S>),
 }
 
 /// One swept key and its values.
@@ -58,14 +58,14 @@ pub struct Axis {
 
 /// One point of a sweep.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Point {
+pub struct Point<S> {
     /// `(key, value text)` per axis, in axis order; the value text is what `--set` gets.
     pub assignments: Vec<(String, String)>,
     /// The point resolved (its `overrides` are the command-line ones, then the assignments).
-    pub resolved: Resolved,
+    pub resolved: Resolved<S>,
 }
 
-impl Point {
+impl<S> Point<S> {
     /// `key=value key=value ...`
     pub fn label(&self) -> String {
         self.assignments
@@ -78,20 +78,20 @@ impl Point {
 
 /// An expanded sweep.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Sweep {
+pub struct Sweep<S> {
     /// The manifest's `name` (of the first point; `name` itself may be swept).
     pub name: String,
     /// Axes in expansion order (swept keys pinned by `--set` removed).
     pub axes: Vec<Axis>,
     /// Points in expansion order (last axis fastest).
-    pub points: Vec<Point>,
+    pub points: Vec<Point<S>>,
     /// Canonical JSON of the sweep (see the module docs).
     pub canonical: String,
     /// Lowercase hex SHA-256 of `canonical`.
     pub hash_hex: String,
 }
 
-impl Sweep {
+impl<S> Sweep<S> {
     /// First 12 hex digits of the sweep hash.
     pub fn short_hash(&self) -> &str {
         &self.hash_hex[..12]
@@ -104,7 +104,7 @@ impl Sweep {
 
 /// Read the manifest at `path`: a [`Plan::Single`] when it has no `sweep` section (exactly
 /// [`super::load`]), else the expanded [`Plan::Sweep`].
-pub fn load_plan(path: &Path, overrides: &[String]) -> Result<Plan> {
+pub fn load_plan<S: SceneSection>(path: &Path, overrides: &[String]) -> Result<Plan<S>> {
     let text = std::fs::read_to_string(path).map_err(|source| ManifestError::Io {
         path: path.to_path_buf(),
         source,
@@ -113,7 +113,11 @@ pub fn load_plan(path: &Path, overrides: &[String]) -> Result<Plan> {
 }
 
 /// Like [`load_plan`], from text.
-pub fn plan_from_str(text: &str, source_name: &str, overrides: &[String]) -> Result<Plan> {
+pub fn plan_from_str<S: SceneSection>(
+    text: &str,
+    source_name: &str,
+    overrides: &[String],
+) -> Result<Plan<S>> {
     let map = SourceMap::build(text);
     let single = || from_str(text, source_name, overrides).map(|r| Plan::Single(Box::new(r)));
     let Some(entry) = map.entries.get(SWEEP_KEY) else {

@@ -4,16 +4,18 @@
 //! `#[serde(default = ...)]`, so a deserialized [`Manifest`] is always fully resolved.
 //! Units are part of the field names (SI throughout).
 //!
-//! Adding a variant to [`Fluid`] or [`Scene`] needs: the variant here, its name in
-//! [`Fluid::model_name`] / [`Scene::kind_name`], and its checks in `validate.rs`
-//! (the compiler points at every `match` that must learn about it).
+//! Adding a variant to [`Fluid`] needs: the variant here, its name in [`Fluid::model_name`],
+//! and its checks in `validate.rs` (the compiler points at every `match` that must learn
+//! about it). Scene sections belong to the test modules (see [`SceneSection`]).
 
 use serde::{Deserialize, Serialize};
+
+use super::validate::Checker;
 
 /// A complete experiment description.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct Manifest {
+pub struct Manifest<S> {
     /// Experiment name, `[A-Za-z0-9_.-]{1,64}`; it becomes part of file names.
     pub name: String,
     /// Spatial dimension: 2 or 3.
@@ -30,8 +32,9 @@ pub struct Manifest {
     /// MPS method parameters.
     #[serde(default)]
     pub mps: Mps,
-    /// Geometry of the test.
-    pub scene: Scene,
+    /// The test and its geometry: one section per workability test, tagged by `kind`
+    /// (defined by the test's module, see [`SceneSection`]).
+    pub scene: S,
     /// What is recorded and how often.
     #[serde(default)]
     pub output: Output,
@@ -40,11 +43,28 @@ pub struct Manifest {
     pub stop: Stop,
 }
 
-impl Manifest {
+impl<S: SceneSection> Manifest<S> {
     /// The `kind` tag of the scene, e.g. `"dam_break"`.
     pub fn scene_kind(&self) -> &'static str {
         self.scene.kind_name()
     }
+}
+
+/// What the manifest needs to know of a `scene:` section. The sections themselves belong to
+/// the test modules (`crate::experiment`), which implement this trait; the manifest only
+/// parses, checks, canonicalises and hashes them (data flows manifest -> test module).
+pub trait SceneSection:
+    Serialize + serde::de::DeserializeOwned + Clone + PartialEq + std::fmt::Debug + 'static
+{
+    /// The `kind` tag, e.g. `"dam_break"`.
+    fn kind_name(&self) -> &'static str;
+    /// Checks of the section (field paths `scene.*`) and of how the rest of the manifest fits
+    /// the test (e.g. its dimension), reported through `c` in field order.
+    fn check(&self, m: &Manifest<Self>, c: &mut Checker);
+    /// Names of the metrics this test reports for `m` (diagnostics and summary).
+    fn metric_names(&self, m: &Manifest<Self>) -> Vec<String>;
+    /// One section per kind with its defaults (for learning the manifest's field paths).
+    fn samples() -> Vec<Self>;
 }
 
 fn default_gravity_m_s2() -> f64 {
@@ -275,148 +295,6 @@ fn default_dummy_layers() -> u32 {
     2
 }
 
-/// Scene (test geometry), tagged by the `kind` key.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
-pub enum Scene {
-    /// A rectangular fluid column collapsing in a tank (Martin & Moyce; Koshizuka & Oka).
-    /// The tank's lower-left(-front) inner corner is the origin; the column stands against
-    /// the wall at x = 0.
-    DamBreak {
-        /// Inner width of the tank along x, in metres.
-        #[serde(default = "default_tank_width_m")]
-        tank_width_m: f64,
-        /// Inner height of the tank along the vertical axis, in metres.
-        #[serde(default = "default_tank_height_m")]
-        tank_height_m: f64,
-        /// Inner depth of the tank along y (3D only), in metres.
-        #[serde(default = "default_tank_depth_m")]
-        tank_depth_m: f64,
-        /// Width of the fluid column along x, in metres.
-        #[serde(default = "default_column_width_m")]
-        column_width_m: f64,
-        /// Height of the fluid column, in metres.
-        #[serde(default = "default_column_height_m")]
-        column_height_m: f64,
-    },
-    /// L-flow test (seed 000): an L-shaped box; the concrete stands in the vertical part
-    /// (x in [0, vertical_width_m]) and flows, once the gate at x = vertical_width_m is
-    /// opened at t = 0, into the horizontal channel (x up to vertical_width_m +
-    /// channel_length_m, height channel_height_m). The vertical part is open at the top.
-    LFlow {
-        /// Inner width of the vertical part, in metres.
-        #[serde(default = "default_lf_vertical_width_m")]
-        vertical_width_m: f64,
-        /// Inner height of the vertical part (wall height), in metres.
-        #[serde(default = "default_lf_vertical_height_m")]
-        vertical_height_m: f64,
-        /// Length of the horizontal channel from the gate to its end wall, in metres.
-        #[serde(default = "default_lf_channel_length_m")]
-        channel_length_m: f64,
-        /// Inner height of the horizontal channel, in metres.
-        #[serde(default = "default_lf_channel_height_m")]
-        channel_height_m: f64,
-        /// Height of the concrete in the vertical part at t = 0, in metres.
-        #[serde(default = "default_lf_fill_height_m")]
-        fill_height_m: f64,
-        /// Depth of the box (3D only), in metres.
-        #[serde(default = "default_lf_depth_m")]
-        depth_m: f64,
-    },
-    /// Slump-flow test, 3D only (seed 004; EN 12350-8): a frustum cone (open at both ends)
-    /// standing on a square no-slip plate, filled with concrete and lifted. The plate's top is
-    /// z = 0, the cone's axis x = y = 0.
-    Slump {
-        /// Inner height of the cone, in metres.
-        #[serde(default = "default_sl_cone_height_m")]
-        cone_height_m: f64,
-        /// Inner diameter at the bottom (on the plate), in metres.
-        #[serde(default = "default_sl_cone_bottom_diameter_m")]
-        cone_bottom_diameter_m: f64,
-        /// Inner diameter at the top, in metres.
-        #[serde(default = "default_sl_cone_top_diameter_m")]
-        cone_top_diameter_m: f64,
-        /// Side of the square plate, in metres.
-        #[serde(default = "default_sl_plate_size_m")]
-        plate_size_m: f64,
-        /// Lift speed of the cone, m/s; 0 = no cone (removed at once at t = 0).
-        #[serde(default = "default_sl_lift_speed_m_s")]
-        lift_speed_m_s: f64,
-        /// Simulated time at which the lift starts, in seconds (the concrete rests in the
-        /// cone before).
-        #[serde(default)]
-        lift_start_s: f64,
-        /// How far the cone is lifted, in metres; it then stays there, clear of the concrete.
-        #[serde(default = "default_sl_lift_height_m")]
-        lift_height_m: f64,
-    },
-}
-
-fn default_sl_cone_height_m() -> f64 {
-    0.3
-}
-fn default_sl_cone_bottom_diameter_m() -> f64 {
-    0.2
-}
-fn default_sl_cone_top_diameter_m() -> f64 {
-    0.1
-}
-fn default_sl_plate_size_m() -> f64 {
-    0.9
-}
-fn default_sl_lift_speed_m_s() -> f64 {
-    0.2
-}
-fn default_sl_lift_height_m() -> f64 {
-    0.4
-}
-
-fn default_lf_vertical_width_m() -> f64 {
-    0.1
-}
-fn default_lf_vertical_height_m() -> f64 {
-    0.6
-}
-fn default_lf_channel_length_m() -> f64 {
-    0.8
-}
-fn default_lf_channel_height_m() -> f64 {
-    0.15
-}
-fn default_lf_fill_height_m() -> f64 {
-    0.41
-}
-fn default_lf_depth_m() -> f64 {
-    0.1
-}
-
-impl Scene {
-    /// The `kind` tag, e.g. `"dam_break"`.
-    pub fn kind_name(&self) -> &'static str {
-        match self {
-            Scene::DamBreak { .. } => "dam_break",
-            Scene::LFlow { .. } => "l_flow",
-            Scene::Slump { .. } => "slump",
-        }
-    }
-}
-
-fn default_tank_width_m() -> f64 {
-    1.0
-}
-fn default_tank_height_m() -> f64 {
-    0.6
-}
-fn default_tank_depth_m() -> f64 {
-    0.1
-}
-fn default_column_width_m() -> f64 {
-    0.25
-}
-fn default_column_height_m() -> f64 {
-    0.5
-}
-
 /// Recording intervals, in seconds of simulated time.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -515,8 +393,9 @@ fn default_max_speed_m_s() -> f64 {
 }
 
 /// One manifest per variant of each tagged section, for learning the set of field paths
-/// (used to name the section of a missing field in error messages). Add new variants here.
-pub(crate) fn samples() -> Vec<Manifest> {
+/// (used to name the section of a missing field in error messages). Add new fluid variants
+/// here; scene variants come from [`SceneSection::samples`].
+pub(crate) fn samples<S: SceneSection>() -> Vec<Manifest<S>> {
     let fluids = [
         Fluid::Newtonian {
             density_kg_m3: 1000.0,
@@ -537,32 +416,7 @@ pub(crate) fn samples() -> Vec<Manifest> {
             stress_gradient_term: false,
         },
     ];
-    let scenes = [
-        Scene::DamBreak {
-            tank_width_m: default_tank_width_m(),
-            tank_height_m: default_tank_height_m(),
-            tank_depth_m: default_tank_depth_m(),
-            column_width_m: default_column_width_m(),
-            column_height_m: default_column_height_m(),
-        },
-        Scene::LFlow {
-            vertical_width_m: default_lf_vertical_width_m(),
-            vertical_height_m: default_lf_vertical_height_m(),
-            channel_length_m: default_lf_channel_length_m(),
-            channel_height_m: default_lf_channel_height_m(),
-            fill_height_m: default_lf_fill_height_m(),
-            depth_m: default_lf_depth_m(),
-        },
-        Scene::Slump {
-            cone_height_m: default_sl_cone_height_m(),
-            cone_bottom_diameter_m: default_sl_cone_bottom_diameter_m(),
-            cone_top_diameter_m: default_sl_cone_top_diameter_m(),
-            plate_size_m: default_sl_plate_size_m(),
-            lift_speed_m_s: default_sl_lift_speed_m_s(),
-            lift_start_s: 0.0,
-            lift_height_m: default_sl_lift_height_m(),
-        },
-    ];
+    let scenes = S::samples();
     let n = fluids.len().max(scenes.len());
     (0..n)
         .map(|i| Manifest {

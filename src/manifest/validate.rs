@@ -3,7 +3,7 @@
 //! Checks run in field order; the first failure is reported. Every `f64` is checked to be
 //! finite (YAML `.nan` / `.inf` reach typed `f64` fields unchanged).
 
-use super::types::{Fluid, Manifest, Scene};
+use super::types::{Fluid, Manifest, SceneSection};
 
 /// One failed check: the dotted field path and what is wrong (without provenance).
 #[derive(Debug, Clone, PartialEq)]
@@ -16,7 +16,7 @@ pub struct Issue {
 
 /// An interval bound check of an `f64`.
 #[derive(Clone, Copy)]
-enum Range {
+pub enum Range {
     /// (lo, hi) with open/closed ends: `lo_closed`, `hi_closed`; `None` = unbounded.
     Between {
         lo: Option<(f64, bool)>,
@@ -24,16 +24,16 @@ enum Range {
     },
 }
 
-const POSITIVE: Range = Range::Between {
+pub const POSITIVE: Range = Range::Between {
     lo: Some((0.0, false)),
     hi: None,
 };
-const NON_NEGATIVE: Range = Range::Between {
+pub const NON_NEGATIVE: Range = Range::Between {
     lo: Some((0.0, true)),
     hi: None,
 };
 
-fn between(lo: f64, lo_closed: bool, hi: f64, hi_closed: bool) -> Range {
+pub fn between(lo: f64, lo_closed: bool, hi: f64, hi_closed: bool) -> Range {
     Range::Between {
         lo: Some((lo, lo_closed)),
         hi: Some((hi, hi_closed)),
@@ -78,7 +78,7 @@ impl Range {
 }
 
 /// Short number formatting for messages: `1` not `1.0`, `1e-9` kept short.
-fn fmt_num(x: f64) -> String {
+pub fn fmt_num(x: f64) -> String {
     if x == x.trunc() && x.abs() < 1e15 {
         format!("{}", x as i64)
     } else {
@@ -86,12 +86,14 @@ fn fmt_num(x: f64) -> String {
     }
 }
 
-struct Checker {
+/// Collects the issues of a manifest in field order (test modules check their `scene:`
+/// sections through it).
+pub struct Checker {
     issues: Vec<Issue>,
 }
 
 impl Checker {
-    fn fail(&mut self, field: &str, message: String) {
+    pub fn fail(&mut self, field: &str, message: String) {
         self.issues.push(Issue {
             field: field.to_string(),
             message,
@@ -100,7 +102,7 @@ impl Checker {
     }
 
     /// Finite and in `range`; returns whether it passed.
-    fn real(&mut self, field: &str, x: f64, range: Range) -> bool {
+    pub fn real(&mut self, field: &str, x: f64, range: Range) -> bool {
         if !x.is_finite() {
             self.fail(field, format!("must be a finite number, got {x:?}"));
             if let Some(issue) = self.issues.last_mut() {
@@ -116,7 +118,7 @@ impl Checker {
     }
 
     /// Each length must hold at least two particle spacings.
-    fn two_spacings(&mut self, dims: &[(&str, f64)], spacing_m: f64) {
+    pub fn two_spacings(&mut self, dims: &[(&str, f64)], spacing_m: f64) {
         for &(field, x) in dims {
             if x < 2.0 * spacing_m {
                 self.fail(
@@ -131,7 +133,7 @@ impl Checker {
         }
     }
 
-    fn int_at_least(&mut self, field: &str, x: u64, min: u64) -> bool {
+    pub fn int_at_least(&mut self, field: &str, x: u64, min: u64) -> bool {
         if x < min {
             self.fail(field, format!("must be >= {min}, got {x}"));
             false
@@ -142,7 +144,7 @@ impl Checker {
 }
 
 /// All issues of `m`, in field order.
-pub fn check(m: &Manifest) -> Vec<Issue> {
+pub fn check<S: SceneSection>(m: &Manifest<S>) -> Vec<Issue> {
     let mut c = Checker { issues: Vec::new() };
 
     // name
@@ -170,7 +172,7 @@ pub fn check(m: &Manifest) -> Vec<Issue> {
     if m.dimension != 2 && m.dimension != 3 {
         c.fail("dimension", format!("must be 2 or 3, got {}", m.dimension));
     }
-    let spacing_ok = c.real("spacing_m", m.spacing_m, POSITIVE);
+    c.real("spacing_m", m.spacing_m, POSITIVE);
     c.real("gravity_m_s2", m.gravity_m_s2, NON_NEGATIVE);
 
     // time
@@ -332,155 +334,8 @@ pub fn check(m: &Manifest) -> Vec<Issue> {
         }
     }
 
-    // scene
-    match &m.scene {
-        // Checked below.
-        Scene::LFlow { .. } | Scene::Slump { .. } => {}
-        Scene::DamBreak {
-            tank_width_m,
-            tank_height_m,
-            tank_depth_m,
-            column_width_m,
-            column_height_m,
-        } => {
-            let dims = [
-                ("scene.tank_width_m", *tank_width_m),
-                ("scene.tank_height_m", *tank_height_m),
-                ("scene.tank_depth_m", *tank_depth_m),
-                ("scene.column_width_m", *column_width_m),
-                ("scene.column_height_m", *column_height_m),
-            ];
-            let mut all_ok = true;
-            for (field, x) in dims {
-                all_ok &= c.real(field, x, POSITIVE);
-            }
-            if all_ok {
-                if column_width_m > tank_width_m {
-                    c.fail(
-                        "scene.column_width_m",
-                        format!(
-                            "must be <= scene.tank_width_m ({}), got {}",
-                            fmt_num(*tank_width_m),
-                            fmt_num(*column_width_m)
-                        ),
-                    );
-                }
-                if column_height_m > tank_height_m {
-                    c.fail(
-                        "scene.column_height_m",
-                        format!(
-                            "must be <= scene.tank_height_m ({}), got {}",
-                            fmt_num(*tank_height_m),
-                            fmt_num(*column_height_m)
-                        ),
-                    );
-                }
-                if spacing_ok {
-                    // The depth is used in 3D only.
-                    let used: Vec<(&str, f64)> = dims
-                        .into_iter()
-                        .filter(|(field, _)| *field != "scene.tank_depth_m" || m.dimension == 3)
-                        .collect();
-                    c.two_spacings(&used, m.spacing_m);
-                }
-            }
-        }
-    }
-
-    if let Scene::Slump {
-        cone_height_m,
-        cone_bottom_diameter_m,
-        cone_top_diameter_m,
-        plate_size_m,
-        lift_speed_m_s,
-        lift_start_s,
-        lift_height_m,
-    } = &m.scene
-    {
-        if m.dimension != 3 {
-            c.fail(
-                "dimension",
-                format!(
-                    "scene.kind slump is a 3D test (an axisymmetric cone): dimension must be 3, got {}",
-                    m.dimension
-                ),
-            );
-        }
-        let dims = [
-            ("scene.cone_height_m", *cone_height_m),
-            ("scene.cone_bottom_diameter_m", *cone_bottom_diameter_m),
-            ("scene.cone_top_diameter_m", *cone_top_diameter_m),
-            ("scene.plate_size_m", *plate_size_m),
-        ];
-        let mut all_ok = true;
-        for (field, x) in dims {
-            all_ok &= c.real(field, x, POSITIVE);
-        }
-        c.real("scene.lift_speed_m_s", *lift_speed_m_s, NON_NEGATIVE);
-        c.real("scene.lift_start_s", *lift_start_s, NON_NEGATIVE);
-        c.real("scene.lift_height_m", *lift_height_m, POSITIVE);
-        if all_ok {
-            let widest = cone_bottom_diameter_m.max(*cone_top_diameter_m);
-            if *plate_size_m <= widest {
-                c.fail(
-                    "scene.plate_size_m",
-                    format!(
-                        "must be > the cone's widest diameter ({}), got {}",
-                        fmt_num(widest),
-                        fmt_num(*plate_size_m)
-                    ),
-                );
-            }
-            if spacing_ok {
-                c.two_spacings(&dims, m.spacing_m);
-            }
-        }
-    }
-
-    if let Scene::LFlow {
-        vertical_width_m,
-        vertical_height_m,
-        channel_length_m,
-        channel_height_m,
-        fill_height_m,
-        depth_m,
-    } = &m.scene
-    {
-        let mut dims = vec![
-            ("scene.vertical_width_m", *vertical_width_m),
-            ("scene.vertical_height_m", *vertical_height_m),
-            ("scene.channel_length_m", *channel_length_m),
-            ("scene.channel_height_m", *channel_height_m),
-            ("scene.fill_height_m", *fill_height_m),
-        ];
-        if m.dimension == 3 {
-            dims.push(("scene.depth_m", *depth_m));
-        }
-        let mut all_ok = true;
-        for (field, x) in &dims {
-            all_ok &= c.real(field, *x, POSITIVE);
-        }
-        if all_ok {
-            for (field, x) in [
-                ("scene.fill_height_m", *fill_height_m),
-                ("scene.channel_height_m", *channel_height_m),
-            ] {
-                if x > *vertical_height_m {
-                    c.fail(
-                        field,
-                        format!(
-                            "must be <= scene.vertical_height_m ({}), got {}",
-                            fmt_num(*vertical_height_m),
-                            fmt_num(x)
-                        ),
-                    );
-                }
-            }
-            if spacing_ok {
-                c.two_spacings(&dims, m.spacing_m);
-            }
-        }
-    }
+    // scene: the test module's own checks
+    m.scene.check(m, &mut c);
 
     // output
     let o = &m.output;
@@ -511,7 +366,7 @@ pub fn check(m: &Manifest) -> Vec<Issue> {
         POSITIVE,
     );
     if let Some(name) = &m.stop.rest_metric {
-        let names = crate::run::metric_names(m);
+        let names = m.scene.metric_names(m);
         if !names.contains(name) {
             c.fail(
                 "stop.rest_metric",

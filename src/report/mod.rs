@@ -407,90 +407,34 @@ pub fn snapshot(
     Ok(out)
 }
 
-/// One radius of a slump-flow surface profile (m).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct ProfilePoint {
-    pub r_m: f64,
-    /// Height of the highest concrete particle within l0/2 of r, plus l0/2.
-    pub measured_m: f64,
-    /// Roussel & Coussot h(r) with the run's measured radius.
-    pub closed_form_m: f64,
-}
-
-/// The surface at rest of a slump-flow run against the closed form: measured mean spread
-/// radius, closed-form radius for the concrete's volume, and h(r) every spacing from the axis
-/// to the measured radius.
-#[derive(Debug, Clone, PartialEq)]
-pub struct SlumpProfile {
-    pub time_s: f64,
-    pub spacing_m: f64,
-    pub density_kg_m3: f64,
-    pub gravity_m_s2: f64,
-    pub yield_stress_pa: f64,
-    pub radius_m: f64,
-    pub closed_form_radius_m: f64,
-    pub points: Vec<ProfilePoint>,
-}
+pub use crate::experiment::slump::{ProfilePoint, SlumpProfile};
 
 /// Profile of the last checkpoint of a slump-flow run.
 pub fn slump_profile(run: &RunFile) -> Result<SlumpProfile> {
-    use crate::scene::slump;
     let resolved = crate::restore::manifest_of(run)
         .map_err(|e| ReportError::Input(format!("the run's manifest: {e}")))?;
     let m = &resolved.manifest;
-    let Some(spec) = crate::run::slump_spec(&m.scene) else {
+    let crate::experiment::SceneSpec::Slump(spec) = &m.scene else {
         return Err(ReportError::Input(format!(
             "run `{}` is not a slump-flow run (scene.kind slump)",
             m.name
         )));
     };
-    let tau = crate::run::yield_stress_pa(&m.fluid);
-    if tau <= 0.0 {
-        return Err(ReportError::Input(
-            "the closed form needs a yield stress (fluid.model bingham or bi_viscosity)".into(),
-        ));
-    }
     let state = run
         .states
         .last()
         .ok_or_else(|| ReportError::Input("the run has no checkpoint".into()))?;
     let particles = crate::checkpoint::particles_from_message::<3>(state)
         .map_err(|e| ReportError::Input(format!("last checkpoint: {e}")))?;
-    let (l0, rho, g) = (m.spacing_m, m.fluid.density_kg_m3(), m.gravity_m_s2);
-    let z_max = spec.cone_height_m;
-    let radii = slump::spread_radii_m(&particles, l0, z_max);
-    let radius_m = radii.iter().sum::<f64>() / radii.len() as f64;
-    let on_plate = (0..particles.len())
-        .filter(|&i| slump::on_plate(&particles, i, z_max))
-        .count();
-    let volume = on_plate as f64 * l0.powi(3);
-    let closed_form_radius_m = slump::closed_form_radius_m(rho, g, volume, tau);
-    let points = (0..)
-        .map(|k| k as f64 * l0)
-        .take_while(|&r| r <= radius_m)
-        .map(|r| ProfilePoint {
-            r_m: r,
-            measured_m: slump::surface_height_m(&particles, l0, r, 0.5 * l0, z_max),
-            closed_form_m: slump::closed_form_height_m(rho, g, tau, radius_m, r),
-        })
-        .collect();
-    Ok(SlumpProfile {
-        time_s: state.time_s,
-        spacing_m: l0,
-        density_kg_m3: rho,
-        gravity_m_s2: g,
-        yield_stress_pa: tau,
-        radius_m,
-        closed_form_radius_m,
-        points,
-    })
+    spec.profile(m, &particles, state.time_s)
+        .map_err(ReportError::Input)
 }
 
 /// `runner profile`: the slump profile as a table (returned) and an SVG plot (default
 /// `<run>-profile.svg` beside the run file) with the closed form for the measured radius and
 /// for the closed-form radius.
 pub fn profile(mcap: &Path, out: Option<&Path>) -> Result<(PathBuf, String)> {
-    use crate::scene::slump::closed_form_height_m;
+    use crate::experiment::slump::closed_form_height_m;
     let run = read(mcap)?;
     let p = slump_profile(&run)?;
     let (rho, g, tau) = (p.density_kg_m3, p.gravity_m_s2, p.yield_stress_pa);

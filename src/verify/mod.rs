@@ -5,12 +5,12 @@ pub mod compare;
 pub mod trend;
 
 use crate::build_info::BuildInfo;
-use crate::manifest::Resolved;
+use crate::experiment::{Resolved, build_scene};
 use crate::proto::foxglove::PointCloud;
 use crate::proto::mps::v1::{CheckpointHash, Diagnostics, StateCheckpoint, Summary};
 use crate::record::{META_BUILD, RunFile, read_run};
 use crate::restore::{ManifestCheck, manifest_of, restore_solver};
-use crate::run::{LoopControl, LoopStart, RunError, Sink, build_scene, solver_config, time_loop};
+use crate::run::{LoopControl, LoopStart, RunError, Sink, solver_config, time_loop};
 use std::fmt;
 use std::path::{Path, PathBuf};
 

@@ -1,6 +1,6 @@
 //! Helpers shared by the integration tests.
 #![allow(dead_code)]
-use mps_runner::manifest::{self, Resolved};
+use mps_runner::experiment::{self, Resolved};
 use mps_runner::run::{RunOptions, RunResult, run};
 use std::path::{Path, PathBuf};
 
@@ -14,7 +14,7 @@ pub fn experiment(name: &str) -> PathBuf {
 
 pub fn resolve(name: &str, sets: &[&str]) -> Resolved {
     let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
-    manifest::load(&experiment(name), &sets).expect("manifest")
+    experiment::load(&experiment(name), &sets).expect("manifest")
 }
 
 pub fn run_in(resolved: &Resolved, out_dir: &Path, threads: usize) -> RunResult {

@@ -1,0 +1,158 @@
+//! L-flow test box (seed 000; JSCE/EFNARC-like L-box): a vertical part holding the concrete
+//! and a horizontal channel it flows into once the gate is opened at t = 0. In 3D the box has
+//! a depth along y.
+use super::geometry::container::add_walls;
+use super::geometry::lattice::{cells, centre, for_each_index};
+use super::{Experiment, Manifest, Scene};
+use crate::manifest::validate::{Checker, POSITIVE, fmt_num};
+use crate::mps::{ParticleKind, Particles, Vector};
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+
+/// `scene: {kind: l_flow}`: an L-shaped box; the concrete stands in the vertical part
+/// (x in [0, vertical_width_m]) and flows, once the gate at x = vertical_width_m is opened at
+/// t = 0, into the horizontal channel (x up to vertical_width_m + channel_length_m, height
+/// channel_height_m). The vertical part is open at the top.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct LFlow {
+    /// Inner width of the vertical part, in metres.
+    pub vertical_width_m: f64,
+    /// Inner height of the vertical part (wall height), in metres.
+    pub vertical_height_m: f64,
+    /// Length of the horizontal channel from the gate to its end wall, in metres.
+    pub channel_length_m: f64,
+    /// Inner height of the horizontal channel, in metres.
+    pub channel_height_m: f64,
+    /// Height of the concrete in the vertical part at t = 0, in metres.
+    pub fill_height_m: f64,
+    /// Depth of the box (3D only), in metres.
+    pub depth_m: f64,
+}
+
+impl Default for LFlow {
+    fn default() -> Self {
+        Self {
+            vertical_width_m: 0.1,
+            vertical_height_m: 0.6,
+            channel_length_m: 0.8,
+            channel_height_m: 0.15,
+            fill_height_m: 0.41,
+            depth_m: 0.1,
+        }
+    }
+}
+
+impl Experiment for LFlow {
+    fn check(&self, m: &Manifest, c: &mut Checker) {
+        let mut dims = vec![
+            ("scene.vertical_width_m", self.vertical_width_m),
+            ("scene.vertical_height_m", self.vertical_height_m),
+            ("scene.channel_length_m", self.channel_length_m),
+            ("scene.channel_height_m", self.channel_height_m),
+            ("scene.fill_height_m", self.fill_height_m),
+        ];
+        if m.dimension == 3 {
+            dims.push(("scene.depth_m", self.depth_m));
+        }
+        let mut all_ok = true;
+        for (field, x) in &dims {
+            all_ok &= c.real(field, *x, POSITIVE);
+        }
+        if !all_ok {
+            return;
+        }
+        for (field, x) in [
+            ("scene.fill_height_m", self.fill_height_m),
+            ("scene.channel_height_m", self.channel_height_m),
+        ] {
+            if x > self.vertical_height_m {
+                c.fail(
+                    field,
+                    format!(
+                        "must be <= scene.vertical_height_m ({}), got {}",
+                        fmt_num(self.vertical_height_m),
+                        fmt_num(x)
+                    ),
+                );
+            }
+        }
+        if super::spacing_ok(m) {
+            c.two_spacings(&dims, m.spacing_m);
+        }
+    }
+    fn build<const D: usize>(&self, m: &Manifest) -> Scene<D> {
+        build::<D>(self, m.spacing_m, m.mps.wall_layers, m.mps.dummy_layers)
+    }
+    fn metric_names(&self, _m: &Manifest) -> Vec<&'static str> {
+        vec!["l_flow_value_m"]
+    }
+    fn metrics<const D: usize>(
+        &self,
+        m: &Manifest,
+        particles: &Particles<D>,
+        out: &mut BTreeMap<String, f64>,
+    ) {
+        out.insert(
+            "l_flow_value_m".to_string(),
+            l_flow_value_m(particles, self, m.spacing_m),
+        );
+    }
+    fn trend_metric(&self) -> &'static str {
+        "l_flow_value_m"
+    }
+}
+
+pub fn build<const D: usize>(
+    p: &LFlow,
+    spacing_m: f64,
+    wall_layers: u32,
+    dummy_layers: u32,
+) -> Scene<D> {
+    let n = |x: f64| cells(x, spacing_m);
+    let (width, length) = (
+        n(p.vertical_width_m),
+        n(p.vertical_width_m + p.channel_length_m),
+    );
+    // Axis 0: along the channel; last axis: vertical; axis 1 in 3D: depth.
+    let extent = |along: i64, vertical: i64| -> [i64; D] {
+        std::array::from_fn(|a| {
+            if a == 0 {
+                along
+            } else if a == D - 1 {
+                vertical
+            } else {
+                n(p.depth_m)
+            }
+        })
+    };
+    let vertical_part = ([0; D], extent(width, n(p.vertical_height_m)));
+    let channel = ([0; D], extent(length, n(p.channel_height_m)));
+    let mut particles = Particles::<D>::default();
+    for_each_index([0; D], extent(width, n(p.fill_height_m)), |idx| {
+        particles.push(centre(idx, spacing_m), ParticleKind::Fluid)
+    });
+    add_walls(
+        &mut particles,
+        &[vertical_part, channel],
+        vertical_part.1[D - 1],
+        spacing_m,
+        wall_layers,
+        dummy_layers,
+    );
+    let size = Vector::<D>::from_fn(|a, _| vertical_part.1[a].max(channel.1[a]) as f64 * spacing_m);
+    Scene {
+        particles,
+        domain_min_m: -size,
+        domain_max_m: size * 2.0,
+        moving_wall: None,
+    }
+}
+
+/// L-flow value: distance from the gate (x = vertical_width_m) to the far edge of the
+/// furthest fluid particle (centre + l0/2); 0 while nothing has passed the gate.
+pub fn l_flow_value_m<const D: usize>(particles: &Particles<D>, p: &LFlow, spacing_m: f64) -> f64 {
+    let gate_x_m = cells(p.vertical_width_m, spacing_m) as f64 * spacing_m;
+    let front = super::front_position_m(particles, spacing_m);
+    (front - gate_x_m).max(0.0)
+}

@@ -1,0 +1,217 @@
+//! The workability tests, one module each. A test owns its manifest `scene:` section (the
+//! struct), its validation, its particle set, its declared metrics and closed forms, its
+//! default trend axis and its report figures; the [`Experiment`] trait names these hooks and
+//! the compiler checks that every test has them.
+//!
+//! Data flows one way: manifest (parse, check, hash) -> test module (scene, metrics) -> MPS
+//! core -> recorder. The only place that lists the tests is the `experiments!` invocation
+//! below: adding a test is one module plus one line there (README, "How to add a test").
+pub mod column_collapse;
+pub mod dam_break;
+pub mod geometry;
+pub mod l_flow;
+pub mod slump;
+
+use crate::manifest::validate::Checker;
+use crate::manifest::{self, Fluid, SceneSection};
+use crate::mps::{MovingWall, ParticleKind, Particles, Vector};
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::path::Path;
+
+/// A manifest whose `scene:` is one of our tests.
+pub type Manifest = manifest::Manifest<SceneSpec>;
+/// A loaded, checked and hashed manifest of one of our tests.
+pub type Resolved = manifest::Resolved<SceneSpec>;
+/// A manifest file: one run or a sweep.
+pub type Plan = manifest::sweep::Plan<SceneSpec>;
+/// An expanded sweep of runs.
+pub type Sweep = manifest::sweep::Sweep<SceneSpec>;
+
+/// Particles of an experiment plus the box fluid particles must stay in.
+#[derive(Debug, Clone)]
+pub struct Scene<const D: usize> {
+    pub particles: Particles<D>,
+    pub domain_min_m: Vector<D>,
+    pub domain_max_m: Vector<D>,
+    /// A wall the solver moves (the slump cone), if any.
+    pub moving_wall: Option<MovingWall>,
+}
+
+/// What makes a test that test. Each method gets the whole manifest (spacing, fluid, MPS
+/// layers) besides the test's own section `self`.
+pub trait Experiment {
+    /// Checks of the section (fields `scene.*`) and of the manifest's fit to the test.
+    fn check(&self, m: &Manifest, c: &mut Checker);
+    /// The particle set at t = 0 and the moving wall, if any.
+    fn build<const D: usize>(&self, m: &Manifest) -> Scene<D>;
+    /// Names of the metrics [`Experiment::metrics`] adds for `m` (besides
+    /// `front_position_m`, which every test reports).
+    fn metric_names(&self, m: &Manifest) -> Vec<&'static str>;
+    /// The test's metrics and closed forms at the current state.
+    fn metrics<const D: usize>(
+        &self,
+        m: &Manifest,
+        particles: &Particles<D>,
+        out: &mut BTreeMap<String, f64>,
+    );
+    /// The summary metric that `runner verify --trend` follows by default.
+    fn trend_metric(&self) -> &'static str;
+    /// Extra figures of `runner report`-like commands: files written beside `run_path`
+    /// (none by default; the slump draws its profile through `runner profile`).
+    fn figures(&self, _run_path: &Path) -> Vec<std::path::PathBuf> {
+        Vec::new()
+    }
+}
+
+/// Declares the tests: the [`SceneSpec`] enum (one variant per `scene.kind`) and the one
+/// `match` that dispatches on it.
+macro_rules! experiments {
+    ($d:tt $($variant:ident($module:ident :: $section:ident) = $kind:literal,)*) => {
+        /// The manifest's `scene:` section, tagged by `kind`; each variant's struct belongs
+        /// to its test module.
+        #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+        #[serde(tag = "kind")]
+        pub enum SceneSpec {
+            $(#[serde(rename = $kind)] $variant($module::$section),)*
+        }
+
+        /// Runs `$body` with `$e` bound to the test of `$spec`.
+        macro_rules! with_experiment {
+            ($d spec:expr, $d e:ident => $d body:expr) => {
+                match $d spec {
+                    $(SceneSpec::$variant($d e) => $d body,)*
+                }
+            };
+        }
+
+        impl SceneSpec {
+            /// The `kind` tag, e.g. `"dam_break"`.
+            pub fn kind_name(&self) -> &'static str {
+                match self {
+                    $(SceneSpec::$variant(_) => $kind,)*
+                }
+            }
+            /// Every test with its default section.
+            pub fn all_defaults() -> Vec<SceneSpec> {
+                vec![$(SceneSpec::$variant($module::$section::default()),)*]
+            }
+        }
+    };
+}
+
+experiments! {$
+    DamBreak(dam_break::DamBreak) = "dam_break",
+    ColumnCollapse(column_collapse::ColumnCollapse) = "column_collapse",
+    LFlow(l_flow::LFlow) = "l_flow",
+    Slump(slump::Slump) = "slump",
+}
+
+impl SceneSection for SceneSpec {
+    fn kind_name(&self) -> &'static str {
+        SceneSpec::kind_name(self)
+    }
+    fn check(&self, m: &Manifest, c: &mut Checker) {
+        with_experiment!(self, e => e.check(m, c))
+    }
+    fn metric_names(&self, m: &Manifest) -> Vec<String> {
+        metric_names(m)
+    }
+    fn samples() -> Vec<Self> {
+        Self::all_defaults()
+    }
+}
+
+impl SceneSpec {
+    /// The summary metric `runner verify --trend` follows by default for this test.
+    pub fn trend_metric(&self) -> &'static str {
+        with_experiment!(self, e => e.trend_metric())
+    }
+}
+
+/// Reads, overrides, checks and hashes the manifest at `path`.
+pub fn load(path: &Path, overrides: &[String]) -> manifest::Result<Resolved> {
+    manifest::load(path, overrides)
+}
+
+/// Like [`load`], from text (`source_name` names it in errors).
+pub fn from_str(text: &str, source_name: &str, overrides: &[String]) -> manifest::Result<Resolved> {
+    manifest::from_str(text, source_name, overrides)
+}
+
+/// Reads a manifest file that may hold a sweep.
+pub fn load_plan(path: &Path, overrides: &[String]) -> manifest::Result<Plan> {
+    manifest::sweep::load_plan(path, overrides)
+}
+
+/// Like [`load_plan`], from text.
+pub fn plan_from_str(
+    text: &str,
+    source_name: &str,
+    overrides: &[String],
+) -> manifest::Result<Plan> {
+    manifest::sweep::plan_from_str(text, source_name, overrides)
+}
+
+/// The particle set a manifest describes.
+pub fn build_scene<const D: usize>(m: &Manifest) -> Scene<D> {
+    with_experiment!(&m.scene, e => e.build::<D>(m))
+}
+
+/// Metrics of the experiment at the current state (documented in the README): the front
+/// position, which every test reports, and the test's own.
+pub fn experiment_metrics<const D: usize>(
+    m: &Manifest,
+    particles: &Particles<D>,
+) -> BTreeMap<String, f64> {
+    let mut out = BTreeMap::new();
+    out.insert(
+        "front_position_m".to_string(),
+        front_position_m(particles, m.spacing_m),
+    );
+    with_experiment!(&m.scene, e => e.metrics(m, particles, &mut out));
+    out
+}
+
+/// Names of the metrics [`experiment_metrics`] gives for this manifest, sorted.
+pub fn metric_names(m: &Manifest) -> Vec<String> {
+    let mut names: Vec<String> = with_experiment!(&m.scene, e => e.metric_names(m))
+        .into_iter()
+        .map(str::to_string)
+        .collect();
+    names.push("front_position_m".to_string());
+    names.sort();
+    names.dedup();
+    names
+}
+
+/// Front position: distance from the wall at x = 0 to the far edge of the furthest fluid
+/// particle (its centre plus half a spacing, so a column of width a starts at exactly a).
+pub fn front_position_m<const D: usize>(particles: &Particles<D>, spacing_m: f64) -> f64 {
+    let mut front = f64::NEG_INFINITY;
+    for i in 0..particles.len() {
+        if particles.kind[i] == ParticleKind::Fluid {
+            front = front.max(particles.position_m[i][0]);
+        }
+    }
+    front + 0.5 * spacing_m
+}
+
+/// Yield stress of the fluid (0 for a Newtonian one).
+pub fn yield_stress_pa(fluid: &Fluid) -> f64 {
+    match *fluid {
+        Fluid::Newtonian { .. } => 0.0,
+        Fluid::Bingham {
+            yield_stress_pa, ..
+        }
+        | Fluid::BiViscosity {
+            yield_stress_pa, ..
+        } => yield_stress_pa,
+    }
+}
+
+/// Whether the manifest's spacing passed its own check (scene checks that compare lengths
+/// with it skip otherwise).
+pub fn spacing_ok(m: &Manifest) -> bool {
+    m.spacing_m.is_finite() && m.spacing_m > 0.0
+}
