@@ -9,7 +9,7 @@ use std::path::Path;
 /// and whose summary has the given L-flow value.
 fn fake_run(dir: &Path, n: usize, yield_pa: f64, gradient: bool, l_flow_m: Option<f64>) {
     let canonical = format!(
-        r#"{{"dimension":2,"fluid":{{"model":"bingham","stress_gradient_term":{gradient},"yield_stress_pa":{yield_pa}}},"name":"l_flow_{n}","output":{{"checkpoint_interval_s":{}}}}}"#,
+        r#"{{"dimension":2,"fluid":{{"model":"bingham","stress_gradient_term":{gradient},"yield_stress_pa":{yield_pa}}},"name":"l_flow_{n}","scene":{{"kind":"l_flow"}},"output":{{"checkpoint_interval_s":{}}}}}"#,
         0.1 + n as f64
     );
     let hash = format!("{n:064x}");

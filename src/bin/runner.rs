@@ -170,9 +170,10 @@ struct VerifyArgs {
     /// Manifest key on the x axis of --trend.
     #[arg(long = "x", value_name = "KEY", default_value = mps_runner::verify::trend::DEFAULT_X)]
     x_key: String,
-    /// Summary metric on the y axis of --trend.
-    #[arg(long = "y", value_name = "METRIC", default_value = mps_runner::verify::trend::DEFAULT_Y)]
-    y_metric: String,
+    /// Summary metric on the y axis of --trend [default: the test's own, e.g. l_flow_value_m
+    /// for the L-flow, spread_diameter_m for the slump].
+    #[arg(long = "y", value_name = "METRIC")]
+    y_metric: Option<String>,
 }
 
 fn main() -> ExitCode {

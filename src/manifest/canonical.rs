@@ -5,7 +5,8 @@
 //! off, which a test checks), `f64` fields always written as floats in serde_json's shortest
 //! round-trip form, `-0.0` written as `0.0`, integers as integers. Settings added after the
 //! format was first used are left out while they are at their original behaviour
-//! (`mps.ppe_preconditioner: jacobi`, `stop.rest_*` without `stop.rest_metric`), so every experiment keeps the hash it had before they existed and files written
+//! (`mps.ppe_preconditioner: jacobi`, `stop.rest_*` without `stop.rest_metric`, null
+//! `mps.wall_collision_*`, an empty `boundaries` section), so every experiment keeps the hash it had before they existed and files written
 //! then still verify. JSON is YAML, so the canonical text loads back through
 //! [`super::from_str`] to the same manifest and hash.
 
@@ -35,6 +36,14 @@ pub fn canonical_text<S: SceneSection>(manifest: &Manifest<S>) -> String {
         && let Some(mps) = value.get_mut("mps").and_then(Value::as_object_mut)
     {
         mps.remove("ppe_preconditioner");
+    }
+    if let Some(mps) = value.get_mut("mps").and_then(Value::as_object_mut) {
+        // null = the rule that held before these fields existed.
+        for key in ["wall_collision_distance", "wall_collision_second_pass"] {
+            if mps.get(key).is_some_and(Value::is_null) {
+                mps.remove(key);
+            }
+        }
     }
     if manifest.stop.rest_metric.is_none()
         && let Some(stop) = value.get_mut("stop").and_then(Value::as_object_mut)

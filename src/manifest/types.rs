@@ -188,6 +188,17 @@ pub struct Mps {
     /// Restitution coefficient of the collision model.
     #[serde(default = "default_collision_restitution")]
     pub collision_restitution: f64,
+    /// Collision distance between a fluid and a wall particle (units of spacing). null = the
+    /// rule files were written with before the field existed: `collision_distance` in 2D,
+    /// max(`collision_distance`, 0.8) in 3D, where a 3D wall lattice has gaps of 0.71 l0
+    /// that a surface particle would fall through.
+    #[serde(default)]
+    pub wall_collision_distance: Option<f64>,
+    /// Collide fluid-wall pairs once more after the pressure correction (which can push a
+    /// surface particle into a gap of the wall lattice). null = the rule before the field
+    /// existed: on in 3D, off in 2D.
+    #[serde(default)]
+    pub wall_collision_second_pass: Option<bool>,
     /// Preconditioner of the PPE conjugate-gradient solver: `jacobi` (the default, which
     /// files written before the choice existed used) or `multigrid` (aggregation multigrid:
     /// a few times fewer iterations; same solution to `ppe_tolerance`, other bits).
@@ -225,6 +236,8 @@ impl Default for Mps {
             compressibility_1_pa: default_compressibility_1_pa(),
             collision_distance: default_collision_distance(),
             collision_restitution: default_collision_restitution(),
+            wall_collision_distance: None,
+            wall_collision_second_pass: None,
             ppe_tolerance: default_ppe_tolerance(),
             ppe_max_iterations: default_ppe_max_iterations(),
             viscosity_tolerance: default_viscosity_tolerance(),

@@ -294,6 +294,13 @@ pub fn check<S: SceneSection>(m: &Manifest<S>) -> Vec<Issue> {
         p.collision_distance,
         between(0.0, true, 1.0, false),
     );
+    if let Some(d) = p.wall_collision_distance {
+        c.real(
+            "mps.wall_collision_distance",
+            d,
+            between(0.0, true, 1.0, false),
+        );
+    }
     c.real(
         "mps.collision_restitution",
         p.collision_restitution,

@@ -14,21 +14,21 @@ use std::fmt;
 use std::path::{Path, PathBuf};
 
 pub const DEFAULT_X: &str = "fluid.yield_stress_pa";
-pub const DEFAULT_Y: &str = "l_flow_value_m";
 
 #[derive(Debug, Clone)]
 pub struct TrendOptions {
     /// Dotted key of the manifest value on the x axis.
     pub x_key: String,
-    /// Summary metric on the y axis.
-    pub y_metric: String,
+    /// Summary metric on the y axis; None = the runs' test's own trend metric
+    /// ([`crate::experiment::Experiment::trend_metric`], e.g. `l_flow_value_m` for the L-flow).
+    pub y_metric: Option<String>,
 }
 
 impl Default for TrendOptions {
     fn default() -> Self {
         Self {
             x_key: DEFAULT_X.to_string(),
-            y_metric: DEFAULT_Y.to_string(),
+            y_metric: None,
         }
     }
 }
@@ -150,6 +150,8 @@ pub fn trend(dir: &Path, options: &TrendOptions) -> Result<TrendReport, String> 
     files.sort();
     let mut skipped = Vec::new();
     let mut runs: Vec<(BTreeMap<String, String>, Point)> = Vec::new();
+    // The y metric: the option, else the trend metric of the first run's test.
+    let mut resolved_y: Option<String> = None;
     for file in files {
         let run = match read_run(&file) {
             Ok(r) => r,
@@ -187,18 +189,37 @@ pub fn trend(dir: &Path, options: &TrendOptions) -> Result<TrendReport, String> 
             skipped.push((file, format!("manifest has no number at {}", options.x_key)));
             continue;
         };
-        let Some(&y) = summary.metrics.get(&options.y_metric) else {
-            skipped.push((file, format!("summary has no metric {}", options.y_metric)));
+        let y_metric = match (&options.y_metric, test_trend_metric(&value)) {
+            (Some(name), _) => name.clone(),
+            (None, Some(name)) => name.to_string(),
+            (None, None) => {
+                skipped.push((
+                    file,
+                    "the stored manifest names no known test (scene.kind): give --y".into(),
+                ));
+                continue;
+            }
+        };
+        let y_metric = resolved_y.get_or_insert(y_metric).clone();
+        let Some(&y) = summary.metrics.get(&y_metric) else {
+            skipped.push((file, format!("summary has no metric {y_metric}")));
             continue;
         };
         runs.push((keys, Point { x, y, file }));
     }
+    let options = TrendOptions {
+        x_key: options.x_key.clone(),
+        y_metric: resolved_y.or_else(|| options.y_metric.clone()),
+    };
+    let y_name = options
+        .y_metric
+        .clone()
+        .unwrap_or_else(|| "its test's metric".into());
     if runs.is_empty() {
         return Err(format!(
-            "{}: no completed run with {} in its manifest and {} in its summary",
+            "{}: no completed run with {} in its manifest and {y_name} in its summary",
             dir.display(),
             options.x_key,
-            options.y_metric
         ));
     }
     // Keys that tell runs apart, besides x: every key whose value is not the same in all.
@@ -234,7 +255,7 @@ pub fn trend(dir: &Path, options: &TrendOptions) -> Result<TrendReport, String> 
                     if hi.x > lo.x && hi.y >= lo.y {
                         violations.push(format!(
                             "{} = {} gives {} = {}, not below {} at {} = {}",
-                            options.x_key, hi.x, options.y_metric, hi.y, lo.y, options.x_key, lo.x
+                            options.x_key, hi.x, y_name, hi.y, lo.y, options.x_key, lo.x
                         ));
                     }
                 }
@@ -250,7 +271,7 @@ pub fn trend(dir: &Path, options: &TrendOptions) -> Result<TrendReport, String> 
         .collect();
     Ok(TrendReport {
         dir: dir.to_path_buf(),
-        options: options.clone(),
+        options,
         groups,
         skipped,
     })
@@ -258,7 +279,8 @@ pub fn trend(dir: &Path, options: &TrendOptions) -> Result<TrendReport, String> 
 
 impl fmt::Display for TrendReport {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        let (xk, yk) = (&self.options.x_key, &self.options.y_metric);
+        let xk = &self.options.x_key;
+        let yk = self.options.y_metric.as_deref().unwrap_or("y");
         for g in &self.groups {
             if g.key.is_empty() {
                 writeln!(f, "{}: all runs", self.dir.display())?;
@@ -305,4 +327,12 @@ impl fmt::Display for TrendReport {
             }
         )
     }
+}
+
+/// The default trend metric of the test a stored canonical manifest describes.
+fn test_trend_metric(canonical: &serde_json::Value) -> Option<&'static str> {
+    let scene = canonical.get("scene")?.clone();
+    serde_json::from_value::<crate::experiment::SceneSpec>(scene)
+        .ok()
+        .map(|s| s.trend_metric())
 }
