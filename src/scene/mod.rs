@@ -3,6 +3,7 @@ pub mod container;
 pub mod dam_break;
 pub mod l_flow;
 pub mod lattice;
+pub mod shapes;
 pub mod slump;
 
 use crate::mps::{ParticleKind, Particles, Vector};
