@@ -164,11 +164,9 @@ pub fn solver_config<const D: usize>(m: &Manifest, scene: &Scene<D>) -> SolverCo
         collision_distance_m: m.mps.collision_distance * l0,
         wall_collision_distance_m: match m.mps.wall_collision_distance {
             Some(d) => d * l0,
-            None => crate::mps::solver::wall_collision_distance_m(
-                D,
-                m.mps.collision_distance * l0,
-                l0,
-            ),
+            None => {
+                crate::mps::solver::wall_collision_distance_m(D, m.mps.collision_distance * l0, l0)
+            }
         },
         collision_restitution: m.mps.collision_restitution,
         ppe_tolerance: m.mps.ppe_tolerance,

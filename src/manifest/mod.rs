@@ -17,6 +17,7 @@ pub mod canonical;
 mod error;
 mod locate;
 mod overrides;
+pub mod shape;
 pub mod sweep;
 mod types;
 pub mod validate;

@@ -1,22 +1,16 @@
-//! Containers made of a union of boxes, walled by wall and dummy particle layers.
-use super::lattice::{centre, for_each_index};
-use crate::mps::{ParticleKind, Particles};
+//! Containers whose inside is a union of boxes, walled by wall and dummy particle layers: a
+//! solid (a box around them minus their union) filled by [`super::shapes::fill_walls`].
+use super::shapes::{Shape, fill_walls};
+use crate::mps::{Particles, Vector};
 
 /// A box of lattice cells, lo..hi (hi exclusive) on every axis.
 pub type CellBox<const D: usize> = ([i64; D], [i64; D]);
 
-/// Chebyshev distance in cells from `index` to the box (0 inside).
-fn distance<const D: usize>(index: [i64; D], b: &CellBox<D>) -> i64 {
-    (0..D)
-        .map(|a| (b.0[a] - index[a]).max(index[a] - (b.1[a] - 1)).max(0))
-        .max()
-        .unwrap_or(0)
-}
-
 /// Adds the wall particles of a container whose inside is the union of `interior` boxes:
-/// every cell within `wall_layers + dummy_layers` cells of the inside (Chebyshev distance) and
-/// below the cell row `top` (the container is open above it). The first `wall_layers` layers
-/// are wall particles, the rest dummies. Cells are visited in a fixed order.
+/// every cell within `wall_layers + dummy_layers` cells of the inside (Chebyshev distance, the
+/// box metric of [`Shape::depth_m`]) and below the cell row `top` (the container is open above
+/// it). The first `wall_layers` layers are wall particles, the rest dummies. Cells are visited
+/// in a fixed order.
 pub fn add_walls<const D: usize>(
     particles: &mut Particles<D>,
     interior: &[CellBox<D>],
@@ -25,26 +19,42 @@ pub fn add_walls<const D: usize>(
     wall_layers: u32,
     dummy_layers: u32,
 ) {
-    let layers = (wall_layers + dummy_layers) as i64;
+    let layers = i64::from(wall_layers + dummy_layers);
     let mut lo = [i64::MAX; D];
     let mut hi = [i64::MIN; D];
     for b in interior {
         for a in 0..D {
-            lo[a] = lo[a].min(b.0[a] - layers);
-            hi[a] = hi[a].max(b.1[a] + layers);
+            lo[a] = lo[a].min(b.0[a]);
+            hi[a] = hi[a].max(b.1[a]);
         }
     }
-    hi[D - 1] = hi[D - 1].min(top);
-    for_each_index(lo, hi, |idx| {
-        let d = interior.iter().map(|b| distance(idx, b)).min().unwrap_or(0);
-        if d == 0 || d > layers {
-            return;
-        }
-        let kind = if d <= wall_layers as i64 {
-            ParticleKind::Wall
-        } else {
-            ParticleKind::Dummy
-        };
-        particles.push(centre(idx, spacing_m), kind);
-    });
+    let corner =
+        |cells: [i64; D], by: i64| Vector::<D>::from_fn(|a, _| (cells[a] + by) as f64 * spacing_m);
+    // The outer box lies 2 layers out, so its own faces are deeper than the layers reach.
+    let solid = Shape::Difference {
+        from: Box::new(Shape::Box {
+            min_m: corner(lo, -2 * layers),
+            max_m: corner(hi, 2 * layers),
+        }),
+        remove: vec![Shape::Union(
+            interior
+                .iter()
+                .map(|b| Shape::Box {
+                    min_m: corner(b.0, 0),
+                    max_m: corner(b.1, 0),
+                })
+                .collect(),
+        )],
+    };
+    let scan_lo: [i64; D] = std::array::from_fn(|a| lo[a] - layers);
+    let mut scan_hi: [i64; D] = std::array::from_fn(|a| hi[a] + layers);
+    scan_hi[D - 1] = scan_hi[D - 1].min(top);
+    fill_walls(
+        particles,
+        &solid,
+        (scan_lo, scan_hi),
+        spacing_m,
+        wall_layers,
+        dummy_layers,
+    );
 }
