@@ -4,17 +4,9 @@
 use crate::checkpoint;
 use crate::experiment::{self, Manifest, Resolved, build_scene};
 use crate::mps::Solver;
-use crate::proto::foxglove::PointCloud;
-use crate::proto::mps::v1::{Diagnostics, StateCheckpoint, Summary};
-use crate::record::{
-    META_MANIFEST, RunFile, TOPIC_DIAGNOSTICS, TOPIC_PARTICLES, TOPIC_STATE, TOPIC_SUMMARY,
-};
+use crate::proto::mps::v1::StateCheckpoint;
+use crate::record::{META_MANIFEST, RunFile};
 use crate::run::solver_config;
-use mcap::read::{ChunkReader, LinearReader, Options};
-use mcap::records::Record;
-use prost::Message as _;
-use std::collections::BTreeMap;
-use std::path::Path;
 
 /// Why a recorded manifest cannot be taken back up.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -149,63 +141,4 @@ pub fn is_scheduled(states: &[StateCheckpoint], i: usize, interval_s: f64) -> bo
     t >= k as f64 * interval_s
 }
 
-/// One logged message, decoded.
-#[derive(Debug, Clone, PartialEq)]
-pub enum Logged {
-    State(StateCheckpoint),
-    Diagnostics(Diagnostics),
-    Cloud(PointCloud),
-    Summary(Summary),
-}
-
-/// Every message of a run file in file order with its log time, up to the last complete
-/// chunk of an unfinished file. Check the file with [`crate::record::read_run`] first: this
-/// reader reports damage but does not re-check the layout.
-pub fn read_messages(path: &Path) -> Result<Vec<(u64, Logged)>, String> {
-    let err = |e: &dyn std::fmt::Display| format!("{}: {e}", path.display());
-    let buf = std::fs::read(path).map_err(|e| err(&e))?;
-    let complete = mcap::read::footer(&buf).is_ok();
-    let reader = if complete {
-        LinearReader::new(&buf)
-    } else {
-        LinearReader::new_with_options(&buf, Options::IgnoreEndMagic.into())
-    }
-    .map_err(|e| err(&e))?;
-    let mut topics: BTreeMap<u16, String> = BTreeMap::new();
-    let mut out = Vec::new();
-    let mut on_record = |record: Record, out: &mut Vec<(u64, Logged)>| -> Result<(), String> {
-        match record {
-            Record::Channel(c) => {
-                topics.insert(c.id, c.topic);
-            }
-            Record::Message { header, data } => {
-                let topic = topics.get(&header.channel_id).map_or("", |t| t.as_str());
-                let decoded = match topic {
-                    TOPIC_STATE => StateCheckpoint::decode(&data[..]).map(Logged::State),
-                    TOPIC_DIAGNOSTICS => Diagnostics::decode(&data[..]).map(Logged::Diagnostics),
-                    TOPIC_PARTICLES => PointCloud::decode(&data[..]).map(Logged::Cloud),
-                    TOPIC_SUMMARY => Summary::decode(&data[..]).map(Logged::Summary),
-                    _ => return Ok(()),
-                };
-                out.push((header.log_time, decoded.map_err(|e| err(&e))?));
-            }
-            _ => {}
-        }
-        Ok(())
-    };
-    for record in reader {
-        let record = match record {
-            Ok(r) => r,
-            Err(_) if !complete => break,
-            Err(e) => return Err(err(&e)),
-        };
-        if let Record::Chunk { header, data } = record {
-            for inner in ChunkReader::new(header, &data).map_err(|e| err(&e))? {
-                on_record(inner.map_err(|e| err(&e))?, &mut out)?;
-            }
-        } else {
-            on_record(record, &mut out)?;
-        }
-    }
-    Ok(out)
-}
+pub use crate::record::{Logged, read_messages};

@@ -76,7 +76,7 @@ pub fn resume(path: &Path, options: &ResumeOptions) -> Result<Resumed, ResumeErr
     };
     let last = run.states.len() - 1;
     let from_scheduled = is_scheduled(&run.states, last, m.output.checkpoint_interval_s);
-    let messages = read_messages(path).map_err(unusable)?;
+    let messages = read_messages(path).map_err(|e| unusable(e.to_string()))?;
 
     // Everything logged before the checkpoint we continue from, in file order (for a
     // scheduled checkpoint that includes the diagnostics and cloud of its own time, which

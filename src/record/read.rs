@@ -38,11 +38,74 @@ struct ChannelInfo {
     message_encoding: String,
 }
 
+/// One logged message, decoded.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Logged {
+    State(StateCheckpoint),
+    Diagnostics(Diagnostics),
+    Cloud(PointCloud),
+    Summary(Summary),
+}
+
 /// Reads a run file. A complete file must be valid throughout. A file without footer (a killed
 /// run, or a `.partial` file) is read up to the last record that can be parsed: every
 /// completed chunk is recovered, along with the metadata written at the start, and
 /// `complete` is false.
 pub fn read_run(path: &Path) -> Result<RunFile> {
+    let mut run = RunFile::default();
+    let (mut states, mut diagnostics, mut clouds) = (Vec::new(), Vec::new(), 0);
+    let (mut last_cloud, mut summary) = (None, None);
+    let walked = walk(path, |_, message| {
+        match message {
+            Logged::State(m) => states.push(m),
+            Logged::Diagnostics(m) => diagnostics.push(m),
+            Logged::Cloud(m) => {
+                last_cloud = Some(m);
+                clouds += 1;
+            }
+            Logged::Summary(m) => {
+                if summary.replace(m).is_some() {
+                    return Err(RecordError::Invalid {
+                        path: path.to_path_buf(),
+                        reason: "more than one /summary message".into(),
+                    });
+                }
+            }
+        }
+        Ok(())
+    })?;
+    run.metadata = walked.metadata;
+    run.complete = walked.complete;
+    run.tail_error = walked.tail_error;
+    run.states = states;
+    run.diagnostics = diagnostics;
+    run.clouds = clouds;
+    run.last_cloud = last_cloud;
+    run.summary = summary;
+    Ok(run)
+}
+
+/// Every message of a run file in file order with its log time, up to the last complete
+/// chunk of an unfinished file (the same reading as [`read_run`]).
+pub fn read_messages(path: &Path) -> Result<Vec<(u64, Logged)>> {
+    let mut out = Vec::new();
+    walk(path, |log_time, message| {
+        out.push((log_time, message));
+        Ok(())
+    })?;
+    Ok(out)
+}
+
+/// What a walk over a file found besides its messages.
+struct Walked {
+    metadata: BTreeMap<String, BTreeMap<String, String>>,
+    complete: bool,
+    tail_error: Option<String>,
+}
+
+/// The one reader of run files: visits every message on our topics in file order, decoded,
+/// with its log time; collects the metadata. See [`read_run`] for unfinished files.
+fn walk(path: &Path, mut on_message: impl FnMut(u64, Logged) -> Result<()>) -> Result<Walked> {
     let buf = std::fs::read(path).map_err(io_err(path))?;
     let complete = mcap::read::footer(&buf).is_ok();
     let reader = if complete {
@@ -52,18 +115,32 @@ pub fn read_run(path: &Path) -> Result<RunFile> {
     }
     .map_err(mcap_err(path))?;
 
-    let mut run = RunFile {
+    let mut walked = Walked {
+        metadata: BTreeMap::new(),
         complete,
-        ..RunFile::default()
+        tail_error: None,
     };
     let mut channels: BTreeMap<u16, ChannelInfo> = BTreeMap::new();
+    let mut counts: BTreeMap<&'static str, usize> = BTreeMap::new();
     let mut saw_header = false;
+    let mut on_record = |record: Record| -> Result<()> {
+        match record {
+            Record::Channel(c) => add_channel(&mut channels, c),
+            Record::Message { header, data } => {
+                if let Some(m) = decode(path, &channels, &mut counts, header.channel_id, &data)? {
+                    on_message(header.log_time, m)?;
+                }
+            }
+            _ => {}
+        }
+        Ok(())
+    };
     for record in reader {
         let record = match record {
             Ok(r) => r,
             // Only a file that starts as an MCAP file may end in an unreadable tail.
             Err(e) if !complete && saw_header => {
-                run.tail_error = Some(e.to_string());
+                walked.tail_error = Some(e.to_string());
                 break;
             }
             Err(e) => return Err(mcap_err(path)(e)),
@@ -81,25 +158,13 @@ pub fn read_run(path: &Path) -> Result<RunFile> {
             Record::Chunk { header, data } => {
                 // A chunk the linear reader yields is whole; damage inside it is an error.
                 for inner in ChunkReader::new(header, &data).map_err(mcap_err(path))? {
-                    match inner.map_err(mcap_err(path))? {
-                        Record::Channel(c) => {
-                            add_channel(&mut channels, c);
-                        }
-                        Record::Message { header, data } => {
-                            on_message(path, &channels, &mut run, header.channel_id, &data)?
-                        }
-                        _ => {}
-                    }
+                    on_record(inner.map_err(mcap_err(path))?)?;
                 }
             }
-            Record::Channel(c) => add_channel(&mut channels, c),
-            Record::Message { header, data } => {
-                on_message(path, &channels, &mut run, header.channel_id, &data)?
-            }
             Record::Metadata(m) => {
-                run.metadata.insert(m.name, m.metadata);
+                walked.metadata.insert(m.name, m.metadata);
             }
-            _ => {}
+            other => on_record(other)?,
         }
     }
     if !saw_header {
@@ -108,7 +173,7 @@ pub fn read_run(path: &Path) -> Result<RunFile> {
             reason: "empty MCAP file (no header record)".into(),
         });
     }
-    Ok(run)
+    Ok(walked)
 }
 
 fn add_channel(channels: &mut BTreeMap<u16, ChannelInfo>, c: mcap::records::Channel) {
@@ -121,13 +186,14 @@ fn add_channel(channels: &mut BTreeMap<u16, ChannelInfo>, c: mcap::records::Chan
     );
 }
 
-fn on_message(
+/// The message decoded, or None on a topic that is not ours.
+fn decode(
     path: &Path,
     channels: &BTreeMap<u16, ChannelInfo>,
-    run: &mut RunFile,
+    counts: &mut BTreeMap<&'static str, usize>,
     channel_id: u16,
     data: &[u8],
-) -> Result<()> {
+) -> Result<Option<Logged>> {
     let invalid = |reason: String| RecordError::Invalid {
         path: path.to_path_buf(),
         reason,
@@ -135,58 +201,34 @@ fn on_message(
     let channel = channels
         .get(&channel_id)
         .ok_or_else(|| invalid(format!("message on undeclared channel {channel_id}")))?;
-    let known = [
+    let Some(topic) = [
         TOPIC_STATE,
         TOPIC_PARTICLES,
         TOPIC_DIAGNOSTICS,
         TOPIC_SUMMARY,
-    ];
-    if !known.contains(&channel.topic.as_str()) {
-        return Ok(());
-    }
+    ]
+    .into_iter()
+    .find(|t| *t == channel.topic) else {
+        return Ok(None);
+    };
     if channel.message_encoding != "protobuf" {
         return Err(invalid(format!(
             "channel {} has message encoding {:?}, expected \"protobuf\"",
             channel.topic, channel.message_encoding
         )));
     }
+    let index = counts.entry(topic).or_default();
     let decode_err = |source| RecordError::Decode {
         path: path.to_path_buf(),
-        what: format!(
-            "message {} on {}",
-            run_count(run, &channel.topic),
-            channel.topic
-        ),
+        what: format!("message {index} on {topic}"),
         source,
     };
-    match channel.topic.as_str() {
-        TOPIC_STATE => run
-            .states
-            .push(StateCheckpoint::decode(data).map_err(decode_err)?),
-        TOPIC_PARTICLES => {
-            run.last_cloud = Some(PointCloud::decode(data).map_err(decode_err)?);
-            run.clouds += 1;
-        }
-        TOPIC_DIAGNOSTICS => run
-            .diagnostics
-            .push(Diagnostics::decode(data).map_err(decode_err)?),
-        TOPIC_SUMMARY => {
-            if run.summary.is_some() {
-                return Err(invalid("more than one /summary message".into()));
-            }
-            run.summary = Some(Summary::decode(data).map_err(decode_err)?);
-        }
-        _ => unreachable!("filtered above"),
-    }
-    Ok(())
-}
-
-/// Index (0-based) of the next message on `topic`, for error messages.
-fn run_count(run: &RunFile, topic: &str) -> usize {
-    match topic {
-        TOPIC_STATE => run.states.len(),
-        TOPIC_PARTICLES => run.clouds,
-        TOPIC_DIAGNOSTICS => run.diagnostics.len(),
-        _ => usize::from(run.summary.is_some()),
-    }
+    let message = match topic {
+        TOPIC_STATE => Logged::State(StateCheckpoint::decode(data).map_err(decode_err)?),
+        TOPIC_PARTICLES => Logged::Cloud(PointCloud::decode(data).map_err(decode_err)?),
+        TOPIC_DIAGNOSTICS => Logged::Diagnostics(Diagnostics::decode(data).map_err(decode_err)?),
+        _ => Logged::Summary(Summary::decode(data).map_err(decode_err)?),
+    };
+    *index += 1;
+    Ok(Some(message))
 }
