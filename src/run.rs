@@ -7,7 +7,8 @@ use crate::manifest::{
     Fluid, Manifest, PpePreconditioner, PpeSource, Resolved, Scene as SceneSpec,
 };
 use crate::mps::{
-    MovingWall, ParticleKind, Particles, Rheology, Solver, SolverConfig, SourceTerm, StageTimes,
+    ParticleKind, Particles, Rheology, RigidBody, Solver, SolverConfig, SourceTerm, StageTimes,
+    Vector,
 };
 use crate::proto::foxglove::PointCloud;
 use crate::proto::mps::v1::{CheckpointHash, Diagnostics, StateCheckpoint, Summary};
@@ -185,7 +186,7 @@ pub(crate) fn slump_spec(s: &SceneSpec) -> Option<scene::slump::Slump> {
 }
 
 /// The wall the solver moves: the slump cone, lifted as the manifest says.
-fn moving_wall<const D: usize>(m: &Manifest, scene: &Scene<D>) -> Option<MovingWall> {
+fn moving_wall<const D: usize>(m: &Manifest, scene: &Scene<D>) -> Option<RigidBody<D>> {
     let range = scene.moving.clone()?;
     match m.scene {
         SceneSpec::Slump {
@@ -193,13 +194,19 @@ fn moving_wall<const D: usize>(m: &Manifest, scene: &Scene<D>) -> Option<MovingW
             lift_start_s,
             lift_height_m,
             ..
-        } => Some(MovingWall {
-            first: range.start,
-            end: range.end,
-            start_s: lift_start_s,
-            speed_m_s: lift_speed_m_s,
-            travel_m: lift_height_m,
-        }),
+        } => {
+            let along_last_axis =
+                |x: f64| Vector::<D>::from_fn(|a, _| if a == D - 1 { x } else { 0.0 });
+            Some(RigidBody {
+                first: range.start,
+                end: range.end,
+                path: crate::mps::Path::lift(
+                    lift_start_s,
+                    along_last_axis(lift_speed_m_s),
+                    along_last_axis(lift_height_m),
+                ),
+            })
+        }
         _ => None,
     }
 }
@@ -288,7 +295,8 @@ pub fn solver_config<const D: usize>(m: &Manifest, scene: &Scene<D>) -> SolverCo
         max_speed_m_s: m.stop.max_speed_m_s,
         domain_min_m: scene.domain_min_m,
         domain_max_m: scene.domain_max_m,
-        moving_wall: moving_wall(m, scene),
+        bodies: moving_wall(m, scene).into_iter().collect(),
+        inlets: Vec::new(),
     }
 }
 
@@ -469,6 +477,7 @@ fn cloud<const D: usize>(solver: &Solver<D>) -> PointCloud {
         .collect();
     let pressure: Vec<f32> = shown.iter().map(|&i| p.pressure_pa[i] as f32).collect();
     let kind: Vec<f32> = shown.iter().map(|&i| p.kind[i] as u32 as f32).collect();
+    let tag: Vec<f32> = shown.iter().map(|&i| f32::from(p.tag[i])).collect();
     // 1 = flowing (Pi > Pi_c at the start of the last step), 0 = non-flowing or not fluid.
     let flowing: Vec<f32> = shown
         .iter()
@@ -486,6 +495,7 @@ fn cloud<const D: usize>(solver: &Solver<D>) -> PointCloud {
             ("speed_m_s", &speed),
             ("pressure_pa", &pressure),
             ("kind", &kind),
+            ("tag", &tag),
             ("flowing", &flowing),
         ],
     )
