@@ -93,9 +93,9 @@ pub fn manifest_of(run: &RunFile) -> Result<Resolved, ManifestCheck> {
     })
 }
 
-/// A solver holding the state of a logged checkpoint (step and time included), configured
-/// from the manifest. The checkpoint's stored hash must match its contents, and its `dt_s`
-/// must be the step the solver computes from that state. Call it inside the thread pool of
+/// A solver holding the state of a logged checkpoint (step, time and inlet progress
+/// included), configured from the manifest. The checkpoint's stored hash must match its
+/// contents, and its `dt_s` must be the step the solver computes from that state. Call it inside the thread pool of
 /// the replay.
 pub fn restore_solver<const D: usize>(
     m: &Manifest,
@@ -110,10 +110,7 @@ pub fn restore_solver<const D: usize>(
     }
     let scene = build_scene::<D>(m);
     let config = solver_config(m, &scene);
-    let particles = checkpoint::particles_from_message::<D>(msg)?;
-    let mut solver = Solver::new(config, particles);
-    solver.time_s = msg.time_s;
-    solver.step = msg.step;
+    let solver = checkpoint::solver_from_message::<D>(config, msg)?;
     let dt = solver.next_dt_s(m.time.end_s);
     if dt.to_bits() != msg.dt_s.to_bits() {
         return Err(format!(

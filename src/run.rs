@@ -176,7 +176,8 @@ pub fn solver_config<const D: usize>(m: &Manifest, scene: &Scene<D>) -> SolverCo
         max_speed_m_s: m.stop.max_speed_m_s,
         domain_min_m: scene.domain_min_m,
         domain_max_m: scene.domain_max_m,
-        moving_wall: scene.moving_wall.clone(),
+        bodies: scene.bodies.clone(),
+        inlets: scene.inlets.clone(),
     }
 }
 
@@ -268,6 +269,7 @@ fn cloud<const D: usize>(solver: &Solver<D>) -> PointCloud {
         .collect();
     let pressure: Vec<f32> = shown.iter().map(|&i| p.pressure_pa[i] as f32).collect();
     let kind: Vec<f32> = shown.iter().map(|&i| p.kind[i] as u32 as f32).collect();
+    let tag: Vec<f32> = shown.iter().map(|&i| f32::from(p.tag[i])).collect();
     // 1 = flowing (Pi > Pi_c at the start of the last step), 0 = non-flowing or not fluid.
     let flowing: Vec<f32> = shown
         .iter()
@@ -285,6 +287,7 @@ fn cloud<const D: usize>(solver: &Solver<D>) -> PointCloud {
             ("speed_m_s", &speed),
             ("pressure_pa", &pressure),
             ("kind", &kind),
+            ("tag", &tag),
             ("flowing", &flowing),
         ],
     )

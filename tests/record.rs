@@ -56,6 +56,7 @@ fn state(index: u32, salt: f64) -> StateCheckpoint {
         kind: (0..n).map(|i| (i % 3) as u32).collect(),
         state_sha256: format!("{index:064x}"),
         extra_scalars: vec![],
+        tag: vec![],
     }
 }
 

@@ -55,8 +55,8 @@ fn scene_geometry() {
         );
         // Every fluid particle is inside the frustum, and symmetric under x -> -x.
         let cone = scene
-            .moving_wall
-            .clone()
+            .bodies
+            .first()
             .map(|w| w.first..w.end)
             .expect("a cone");
         for i in 0..p.len() {
@@ -97,7 +97,7 @@ fn scene_geometry() {
         &["spacing_m=0.025", "scene.lift_speed_m_s=0"],
     )
     .manifest;
-    assert!(build_scene::<3>(&m).moving_wall.is_none());
+    assert!(build_scene::<3>(&m).bodies.is_empty());
 }
 
 /// The cone holds the fluid until the lift starts, then rises at the lift speed; a replay
@@ -116,7 +116,7 @@ fn cone_lifts_at_its_speed_and_holds_the_fluid_before() {
     );
     let m = &resolved.manifest;
     let start = build_scene::<3>(m);
-    let cone = start.moving_wall.clone().map(|w| w.first..w.end).unwrap();
+    let cone = start.bodies.first().map(|w| w.first..w.end).unwrap();
     let dir = tempfile::tempdir().unwrap();
     let result = common::run_in(&resolved, dir.path(), 2);
     assert_eq!(

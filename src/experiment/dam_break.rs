@@ -154,6 +154,7 @@ pub fn build<const D: usize>(
         particles,
         domain_min_m: -extent,
         domain_max_m: extent * 2.0,
-        moving_wall: None,
+        bodies: Vec::new(),
+        inlets: Vec::new(),
     }
 }

@@ -145,7 +145,8 @@ pub fn build<const D: usize>(
         particles,
         domain_min_m: -size,
         domain_max_m: size * 2.0,
-        moving_wall: None,
+        bodies: Vec::new(),
+        inlets: Vec::new(),
     }
 }
 

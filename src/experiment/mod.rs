@@ -14,7 +14,7 @@ pub mod slump;
 
 use crate::manifest::validate::Checker;
 use crate::manifest::{self, Fluid, SceneSection};
-use crate::mps::{MovingWall, ParticleKind, Particles, Vector};
+use crate::mps::{Inlet, ParticleKind, Particles, RigidBody, Vector};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -34,8 +34,10 @@ pub struct Scene<const D: usize> {
     pub particles: Particles<D>,
     pub domain_min_m: Vector<D>,
     pub domain_max_m: Vector<D>,
-    /// A wall the solver moves (the slump cone), if any.
-    pub moving_wall: Option<MovingWall>,
+    /// Rigid bodies of wall particles on time-pure paths (the slump cone, rods).
+    pub bodies: Vec<RigidBody<D>>,
+    /// Inlets that add fluid during the run.
+    pub inlets: Vec<Inlet<D>>,
 }
 
 /// What makes a test that test. Each method gets the whole manifest (spacing, fluid, MPS
@@ -43,7 +45,7 @@ pub struct Scene<const D: usize> {
 pub trait Experiment {
     /// Checks of the section (fields `scene.*`) and of the manifest's fit to the test.
     fn check(&self, m: &Manifest, c: &mut Checker);
-    /// The particle set at t = 0 and the moving wall, if any.
+    /// The particle set at t = 0, its moving bodies and its inlets.
     fn build<const D: usize>(&self, m: &Manifest) -> Scene<D>;
     /// Names of the metrics [`Experiment::metrics`] adds for `m` (besides
     /// `front_position_m`, which every test reports).

@@ -16,7 +16,7 @@
 use super::geometry::lattice::{cells, centre, for_each_index};
 use super::{Experiment, Manifest, Scene, yield_stress_pa};
 use crate::manifest::validate::{Checker, NON_NEGATIVE, POSITIVE, fmt_num};
-use crate::mps::{MovingWall, ParticleKind, Particles, Vector};
+use crate::mps::{ParticleKind, Particles, Path, RigidBody, Vector};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
@@ -100,21 +100,13 @@ impl Experiment for Slump {
     }
 
     fn build<const D: usize>(&self, m: &Manifest) -> Scene<D> {
-        let mut scene = build::<D>(
+        build::<D>(
             self,
             m.spacing_m,
             m.mps.wall_layers,
             m.mps.dummy_layers,
             self.lift_speed_m_s > 0.0,
-        );
-        // The cone (built last) rises as the manifest says.
-        scene.moving_wall = scene.moving_wall.map(|w| MovingWall {
-            start_s: self.lift_start_s,
-            speed_m_s: self.lift_speed_m_s,
-            travel_m: self.lift_height_m,
-            ..w
-        });
-        scene
+        )
     }
 
     fn metric_names(&self, m: &Manifest) -> Vec<&'static str> {
@@ -285,7 +277,8 @@ impl Slump {
 }
 
 /// Builds the slump scene (3D only: the manifest rejects `dimension: 2`); the cone, if any,
-/// is the moving wall, not yet set in motion (see [`Experiment::build`]).
+/// is a rigid body lifted along z from `lift_start_s` at `lift_speed_m_s` by
+/// `lift_height_m`, then held.
 pub fn build<const D: usize>(
     p: &Slump,
     spacing_m: f64,
@@ -358,13 +351,23 @@ pub fn build<const D: usize>(
         particles,
         domain_min_m,
         domain_max_m,
-        moving_wall: (end > first).then_some(MovingWall {
-            first,
-            end,
-            start_s: 0.0,
-            speed_m_s: 0.0,
-            travel_m: 0.0,
-        }),
+        bodies: (end > first)
+            .then(|| {
+                let along_z =
+                    |x: f64| Vector::<D>::from_fn(|a, _| if a == D - 1 { x } else { 0.0 });
+                RigidBody {
+                    first,
+                    end,
+                    path: Path::lift(
+                        p.lift_start_s,
+                        along_z(p.lift_speed_m_s),
+                        along_z(p.lift_height_m),
+                    ),
+                }
+            })
+            .into_iter()
+            .collect(),
+        inlets: Vec::new(),
     }
 }
 

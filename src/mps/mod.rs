@@ -1,5 +1,7 @@
 //! The MPS solver core, generic over the dimension `D` (2 or 3).
+pub mod body;
 pub mod grid;
+pub mod inlet;
 pub mod kernel;
 pub mod multigrid;
 pub mod operators;
@@ -10,6 +12,8 @@ pub mod rheology;
 pub mod solver;
 pub mod viscosity;
 
+pub use body::{Path, RigidBody, Segment};
+pub use inlet::Inlet;
 pub use particles::{ParticleKind, Particles, Vector};
 pub use rheology::Rheology;
-pub use solver::{MovingWall, Solver, SolverConfig, SourceTerm, StageTimes, StepError, StepReport};
+pub use solver::{Solver, SolverConfig, SourceTerm, StageTimes, StepError, StepReport};

@@ -46,6 +46,9 @@ pub struct Particles<const D: usize> {
     pub velocity_m_s: Vec<Vector<D>>,
     pub pressure_pa: Vec<f64>,
     pub kind: Vec<ParticleKind>,
+    /// A small integer per particle for the user's bookkeeping (layer, material, origin):
+    /// recorded and shown, never read by the method itself. Ghosts keep theirs.
+    pub tag: Vec<u16>,
 }
 
 impl<const D: usize> Default for Particles<D> {
@@ -55,6 +58,7 @@ impl<const D: usize> Default for Particles<D> {
             velocity_m_s: Vec::new(),
             pressure_pa: Vec::new(),
             kind: Vec::new(),
+            tag: Vec::new(),
         }
     }
 }
@@ -66,11 +70,17 @@ impl<const D: usize> Particles<D> {
     pub fn is_empty(&self) -> bool {
         self.position_m.is_empty()
     }
+    /// Appends a particle at rest with pressure 0 and tag 0.
     pub fn push(&mut self, position_m: Vector<D>, kind: ParticleKind) {
+        self.push_tagged(position_m, kind, 0);
+    }
+    /// Appends a particle at rest with pressure 0 and the given tag.
+    pub fn push_tagged(&mut self, position_m: Vector<D>, kind: ParticleKind, tag: u16) {
         self.position_m.push(position_m);
         self.velocity_m_s.push(Vector::<D>::zeros());
         self.pressure_pa.push(0.0);
         self.kind.push(kind);
+        self.tag.push(tag);
     }
     pub fn count(&self, kind: ParticleKind) -> usize {
         self.kind.iter().filter(|k| **k == kind).count()

@@ -1,5 +1,7 @@
 //! One time step of the MPS method (DESIGN.md section 3), stage by stage.
+use super::body::RigidBody;
 use super::grid::{KernelPairs, Neighbours};
+use super::inlet::Inlet;
 use super::kernel::{RefValues, weight};
 use super::multigrid::Multigrid;
 use super::operators::{gradient, number_density};
@@ -48,37 +50,10 @@ pub struct SolverConfig<const D: usize> {
     /// Fluid particles must stay inside this box.
     pub domain_min_m: Vector<D>,
     pub domain_max_m: Vector<D>,
-    /// A wall that moves (the slump cone), if any.
-    pub moving_wall: Option<MovingWall>,
-}
-
-/// Wall and dummy particles `first..end` that rise along the last axis (the slump cone):
-/// from `start_s` on at `speed_m_s` until they have risen `travel_m`, then they stay. Their
-/// height is a pure function of the simulated time, so a checkpoint (which holds positions
-/// and time) is all a resumed run needs. While rising their velocity is the lift velocity, so
-/// the implicit viscous stage sees a moving no-slip wall.
-#[derive(Debug, Clone, PartialEq)]
-pub struct MovingWall {
-    pub first: usize,
-    pub end: usize,
-    pub start_s: f64,
-    pub speed_m_s: f64,
-    pub travel_m: f64,
-}
-
-impl MovingWall {
-    /// How far the wall has risen at time `t_s` (0 before `start_s`, at most `travel_m`).
-    pub fn offset_m(&self, t_s: f64) -> f64 {
-        ((t_s - self.start_s) * self.speed_m_s).clamp(0.0, self.travel_m)
-    }
-    /// Its upward speed during the step that starts at `t_s`.
-    pub fn speed_at_m_s(&self, t_s: f64) -> f64 {
-        if t_s >= self.start_s && self.offset_m(t_s) < self.travel_m {
-            self.speed_m_s
-        } else {
-            0.0
-        }
-    }
+    /// Walls that move on time-pure paths (the slump cone), applied in order.
+    pub bodies: Vec<RigidBody<D>>,
+    /// Openings that pour fluid, served in order at the start of each step.
+    pub inlets: Vec<Inlet<D>>,
 }
 
 /// Source term of the pressure Poisson equation.
@@ -179,6 +154,11 @@ pub struct Solver<const D: usize> {
     pub particles: Particles<D>,
     pub time_s: f64,
     pub step: u64,
+    /// Particles poured so far by each inlet of `config.inlets` (same order). Part of the
+    /// state: recorded in the checkpoint's `extra_scalars`, restored on resume and replay.
+    pub inlet_emitted: Vec<u64>,
+    /// Cross-section lattice of each inlet (derived from the configuration once).
+    inlet_sections: Vec<Vec<Vector<D>>>,
     /// Strain-rate invariant Pi of every particle at the start of the last step (empty before
     /// the first step). Derived data for output, not part of the state.
     pub strain_invariant: Vec<f64>,
@@ -203,7 +183,14 @@ impl<const D: usize> Solver<D> {
     pub fn new(config: SolverConfig<D>, particles: Particles<D>) -> Self {
         let refs =
             RefValues::on_lattice::<D>(config.spacing_m, config.radius_n_m, config.radius_lap_m);
+        let inlet_sections = config
+            .inlets
+            .iter()
+            .map(|inlet| inlet.cross_section_m(config.spacing_m))
+            .collect();
         Self {
+            inlet_emitted: vec![0; config.inlets.len()],
+            inlet_sections,
             config,
             refs,
             particles,
@@ -237,11 +224,17 @@ impl<const D: usize> Solver<D> {
     }
 
     /// Time step from the CFL condition (Courant number on the largest speed) and dt_max, never
-    /// past `end_time_s`. Viscosity is implicit, so it sets no limit.
+    /// past `end_time_s`. Viscosity is implicit, so it sets no limit. An inlet that has not
+    /// finished pouring counts with its inflow speed (its next layer enters at that speed).
     pub fn next_dt_s(&self, end_time_s: f64) -> f64 {
         let c = &self.config;
         let mut dt = c.dt_max_s;
-        let speed = self.max_fluid_speed_m_s();
+        let mut speed = self.max_fluid_speed_m_s();
+        for (inlet, &emitted) in c.inlets.iter().zip(&self.inlet_emitted) {
+            if emitted < inlet.total_count(c.spacing_m) {
+                speed = speed.max(inlet.speed_m_s);
+            }
+        }
         if speed > 0.0 {
             dt = dt.min(c.courant * c.spacing_m / speed);
         }
@@ -275,11 +268,13 @@ impl<const D: usize> Solver<D> {
     fn step_stages(&mut self, dt_s: f64) -> Result<StepReport, StepError> {
         // (1) Viscosity (implicit, with the effective viscosity of the rheology) and gravity
         // give the predicted velocity u*, then (2) r* = r + dt u*.
-        if let Some(w) = &self.config.moving_wall {
-            let speed = w.speed_at_m_s(self.time_s);
-            for v in &mut self.particles.velocity_m_s[w.first..w.end] {
-                *v = Vector::<D>::zeros();
-                v[D - 1] = speed;
+        self.pour();
+        // Rigid bodies carry their path velocity during the step (a moving no-slip wall for
+        // the viscous stage).
+        for body in &self.config.bodies {
+            let velocity = body.path.velocity_m_s(self.time_s);
+            for v in &mut self.particles.velocity_m_s[body.first..body.end] {
+                *v = velocity;
             }
         }
         self.rebuild_neighbours();
@@ -316,10 +311,13 @@ impl<const D: usize> Solver<D> {
                     p.position_m[i] += p.velocity_m_s[i] * dt_s;
                 }
             }
-            if let Some(w) = &self.config.moving_wall {
-                let rise = w.offset_m(self.time_s + dt_s) - w.offset_m(self.time_s);
-                for x in &mut p.position_m[w.first..w.end] {
-                    x[D - 1] += rise;
+            // Bodies move by the change of their path offset over the step, so they stay at
+            // their initial position plus the offset (up to round-off) without any state.
+            for body in &self.config.bodies {
+                let path = &body.path;
+                let shift = path.offset_m(self.time_s + dt_s) - path.offset_m(self.time_s);
+                for x in &mut p.position_m[body.first..body.end] {
+                    *x += shift;
                 }
             }
         }
@@ -690,6 +688,50 @@ impl<const D: usize> Solver<D> {
         for i in 0..p.len() {
             p.velocity_m_s[i] += dv[i];
             p.position_m[i] += dv[i] * dt_s;
+        }
+    }
+
+    /// Inlets, in order: the next layer of each unfinished inlet whose due time has come is
+    /// appended at the end of the particle arrays, unless a fluid particle lies within
+    /// 0.5 l0 of one of its positions (then the inlet waits). At most one layer per inlet per
+    /// step: a second due layer would sit on the first one, which blocks it.
+    fn pour(&mut self) {
+        let l0 = self.config.spacing_m;
+        let clearance2 = 0.25 * l0 * l0;
+        for k in 0..self.config.inlets.len() {
+            let inlet = &self.config.inlets[k];
+            let section = &self.inlet_sections[k];
+            let total = inlet.total_count(l0);
+            let emitted = self.inlet_emitted[k];
+            if emitted >= total || section.is_empty() {
+                continue;
+            }
+            let layer = emitted / section.len() as u64;
+            if self.time_s < inlet.layer_due_s(layer, l0) {
+                continue;
+            }
+            let count = section.len().min((total - emitted) as usize);
+            let points = &section[..count];
+            // Only fluid near the opening can block it: skip the rest with one distance.
+            let reach = inlet.radius_m + 0.5 * l0;
+            let p = &self.particles;
+            let blocked = (0..p.len()).any(|i| {
+                p.kind[i] == ParticleKind::Fluid
+                    && (p.position_m[i] - inlet.centre_m).norm_squared() <= reach * reach
+                    && points
+                        .iter()
+                        .any(|x| (p.position_m[i] - x).norm_squared() < clearance2)
+            });
+            if blocked {
+                continue;
+            }
+            let velocity = inlet.unit_direction() * inlet.speed_m_s;
+            let p = &mut self.particles;
+            for x in points {
+                p.push_tagged(*x, ParticleKind::Fluid, inlet.tag);
+                *p.velocity_m_s.last_mut().expect("just pushed") = velocity;
+            }
+            self.inlet_emitted[k] += count as u64;
         }
     }
 

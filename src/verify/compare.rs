@@ -19,7 +19,8 @@ fn kind_name(k: u32) -> String {
 
 /// The first difference between a logged and a replayed checkpoint, in this order: header
 /// (dimension, step, time, dt, particle count), then particle by particle (kind, position,
-/// velocity, pressure), then the stored hash. `None` when identical bit for bit.
+/// velocity, pressure), then the extra scalars and the tags, then the stored hash. `None`
+/// when identical bit for bit.
 pub fn first_difference(logged: &StateCheckpoint, replayed: &StateCheckpoint) -> Option<String> {
     if logged.dimension != replayed.dimension {
         return Some(format!(
@@ -102,6 +103,19 @@ pub fn first_difference(logged: &StateCheckpoint, replayed: &StateCheckpoint) ->
         return Some(format!(
             "extra_scalars: logged {:?}, replayed {:?}",
             logged.extra_scalars, replayed.extra_scalars
+        ));
+    }
+    if logged.tag != replayed.tag {
+        return Some(format!(
+            "tag: logged {} values, replayed {} (first difference at particle {})",
+            logged.tag.len(),
+            replayed.tag.len(),
+            logged
+                .tag
+                .iter()
+                .zip(&replayed.tag)
+                .position(|(a, b)| a != b)
+                .unwrap_or(logged.tag.len().min(replayed.tag.len()))
         ));
     }
     if logged.state_sha256 != replayed.state_sha256 {
