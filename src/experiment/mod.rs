@@ -6,6 +6,7 @@
 //! Data flows one way: manifest (parse, check, hash) -> test module (scene, metrics) -> MPS
 //! core -> recorder. The only place that lists the tests is the `experiments!` invocation
 //! below: adding a test is one module plus one line there (README, "How to add a test").
+pub mod boundaries;
 pub mod column_collapse;
 pub mod dam_break;
 pub mod geometry;
@@ -114,7 +115,8 @@ impl SceneSection for SceneSpec {
         SceneSpec::kind_name(self)
     }
     fn check(&self, m: &Manifest, c: &mut Checker) {
-        with_experiment!(self, e => e.check(m, c))
+        with_experiment!(self, e => e.check(m, c));
+        boundaries::check(m, c);
     }
     fn metric_names(&self, m: &Manifest) -> Vec<String> {
         metric_names(m)
@@ -157,7 +159,9 @@ pub fn plan_from_str(
 
 /// The particle set a manifest describes.
 pub fn build_scene<const D: usize>(m: &Manifest) -> Scene<D> {
-    with_experiment!(&m.scene, e => e.build::<D>(m))
+    let mut scene = with_experiment!(&m.scene, e => e.build::<D>(m));
+    boundaries::apply(m, &mut scene);
+    scene
 }
 
 /// Metrics of the experiment at the current state (documented in the README): the front
@@ -172,7 +176,27 @@ pub fn experiment_metrics<const D: usize>(
         front_position_m(particles, m.spacing_m),
     );
     with_experiment!(&m.scene, e => e.metrics(m, particles, &mut out));
+    let tags = boundaries::tags_in_use(&m.boundaries);
+    if !tags.is_empty() {
+        let mut counts = vec![0usize; usize::from(*tags.last().expect("not empty")) + 1];
+        for i in 0..particles.len() {
+            if particles.kind[i] == ParticleKind::Fluid {
+                let t = usize::from(particles.tag[i]);
+                if t < counts.len() {
+                    counts[t] += 1;
+                }
+            }
+        }
+        for t in tags {
+            out.insert(tag_metric(t), counts[usize::from(t)] as f64);
+        }
+    }
     out
+}
+
+/// The metric counting the fluid particles of tag `tag`.
+fn tag_metric(tag: u16) -> String {
+    format!("fluid_count_tag_{tag}")
 }
 
 /// Names of the metrics [`experiment_metrics`] gives for this manifest, sorted.
@@ -182,6 +206,11 @@ pub fn metric_names(m: &Manifest) -> Vec<String> {
         .map(str::to_string)
         .collect();
     names.push("front_position_m".to_string());
+    names.extend(
+        boundaries::tags_in_use(&m.boundaries)
+            .into_iter()
+            .map(tag_metric),
+    );
     names.sort();
     names.dedup();
     names

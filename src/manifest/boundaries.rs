@@ -97,7 +97,10 @@ pub fn check(b: &Boundaries, dimension: usize) -> Vec<(String, String)> {
         ("boundaries.tags", b.tags.len()),
     ] {
         if len > MAX_ITEMS {
-            out.push((list.to_string(), format!("at most {MAX_ITEMS} items, got {len}")));
+            out.push((
+                list.to_string(),
+                format!("at most {MAX_ITEMS} items, got {len}"),
+            ));
         }
     }
     for (i, s) in b.obstacles.iter().enumerate() {
@@ -112,7 +115,11 @@ pub fn check(b: &Boundaries, dimension: usize) -> Vec<(String, String)> {
         check_inlet(inlet, d, &format!("boundaries.inlets.{i}"), &mut out);
     }
     for (i, t) in b.tags.iter().enumerate() {
-        out.extend(shape::check(&t.region, d, &format!("boundaries.tags.{i}.region")));
+        out.extend(shape::check(
+            &t.region,
+            d,
+            &format!("boundaries.tags.{i}.region"),
+        ));
     }
     out
 }

@@ -45,6 +45,11 @@ pub fn canonical_text<S: SceneSection>(manifest: &Manifest<S>) -> String {
             }
         }
     }
+    if manifest.boundaries.is_empty()
+        && let Some(top) = value.as_object_mut()
+    {
+        top.remove("boundaries");
+    }
     if manifest.stop.rest_metric.is_none()
         && let Some(stop) = value.get_mut("stop").and_then(Value::as_object_mut)
     {

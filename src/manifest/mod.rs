@@ -13,6 +13,7 @@
 //!    value was written there);
 //! 5. the canonical text and its SHA-256 are computed (see [`canonical`]).
 
+pub mod boundaries;
 pub mod canonical;
 mod error;
 mod locate;

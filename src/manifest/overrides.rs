@@ -110,6 +110,39 @@ pub fn apply<S: SceneSection>(root: &mut Value, raw: &str, touched: &mut Touched
         } else {
             format!("`{here}`")
         };
+        if node.is_array() {
+            // A list item, by its index (`boundaries.inlets.0.volume_m3`).
+            let Value::Array(items) = node else {
+                unreachable!("checked above")
+            };
+            let n = items.len();
+            let Some(index) = seg.parse::<usize>().ok().filter(|&k| k < n) else {
+                return Err(err(
+                    key,
+                    format!(
+                        "`{here}` is a list of {n} items: `{seg}` is not an index 0 to {}",
+                        n.saturating_sub(1)
+                    ),
+                ));
+            };
+            let child_path = format!("{here}.{seg}");
+            if last {
+                if items[index].is_object() || items[index].is_array() {
+                    return Err(err(
+                        key,
+                        format!(
+                            "`{child_path}` is a section, not a value; set one of its keys instead"
+                        ),
+                    ));
+                }
+                items[index] = new;
+                touched.set.insert(child_path);
+                return Ok(());
+            }
+            node = &mut items[index];
+            here = child_path;
+            continue;
+        }
         let Value::Object(map) = node else {
             return Err(err(
                 key,

@@ -10,6 +10,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::boundaries::Boundaries;
 use super::validate::Checker;
 
 /// A complete experiment description.
@@ -35,6 +36,9 @@ pub struct Manifest<S> {
     /// The test and its geometry: one section per workability test, tagged by `kind`
     /// (defined by the test's module, see [`SceneSection`]).
     pub scene: S,
+    /// Obstacles, moving bodies, inlets and tag regions any test can add (empty by default).
+    #[serde(default)]
+    pub boundaries: Boundaries,
     /// What is recorded and how often.
     #[serde(default)]
     pub output: Output,
@@ -445,6 +449,7 @@ pub(crate) fn samples<S: SceneSection>() -> Vec<Manifest<S>> {
             fluid: fluids[i.min(fluids.len() - 1)].clone(),
             mps: Mps::default(),
             scene: scenes[i.min(scenes.len() - 1)].clone(),
+            boundaries: Boundaries::default(),
             output: Output::default(),
             stop: Stop::default(),
         })

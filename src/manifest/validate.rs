@@ -344,6 +344,11 @@ pub fn check<S: SceneSection>(m: &Manifest<S>) -> Vec<Issue> {
     // scene: the test module's own checks
     m.scene.check(m, &mut c);
 
+    // boundaries
+    for (field, message) in super::boundaries::check(&m.boundaries, m.dimension as usize) {
+        c.fail(&field, message);
+    }
+
     // output
     let o = &m.output;
     c.real(

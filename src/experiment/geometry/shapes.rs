@@ -109,6 +109,38 @@ impl<const D: usize> Shape<D> {
         }
     }
 
+    /// The same shape moved by `by_m`.
+    pub fn translated(&self, by_m: &Vector<D>) -> Shape<D> {
+        match self {
+            Shape::Box { min_m, max_m } => Shape::Box {
+                min_m: min_m + by_m,
+                max_m: max_m + by_m,
+            },
+            Shape::Sphere { centre_m, radius_m } => Shape::Sphere {
+                centre_m: centre_m + by_m,
+                radius_m: *radius_m,
+            },
+            Shape::Frustum {
+                base_centre_m,
+                axis,
+                bottom_radius_m,
+                top_radius_m,
+                height_m,
+            } => Shape::Frustum {
+                base_centre_m: base_centre_m + by_m,
+                axis: *axis,
+                bottom_radius_m: *bottom_radius_m,
+                top_radius_m: *top_radius_m,
+                height_m: *height_m,
+            },
+            Shape::Union(of) => Shape::Union(of.iter().map(|s| s.translated(by_m)).collect()),
+            Shape::Difference { from, remove } => Shape::Difference {
+                from: std::boxed::Box::new(from.translated(by_m)),
+                remove: remove.iter().map(|s| s.translated(by_m)).collect(),
+            },
+        }
+    }
+
     /// Signed depth of `x` below the surface, metres: > 0 inside, < 0 outside.
     pub fn depth_m(&self, x: &Vector<D>) -> f64 {
         match self {
