@@ -168,6 +168,7 @@ pub fn solver_config<const D: usize>(m: &Manifest, scene: &Scene<D>) -> SolverCo
                 crate::mps::solver::wall_collision_distance_m(D, m.mps.collision_distance * l0, l0)
             }
         },
+        wall_collision_second_pass: m.mps.wall_collision_second_pass.unwrap_or(D == 3),
         collision_restitution: m.mps.collision_restitution,
         ppe_tolerance: m.mps.ppe_tolerance,
         ppe_max_iterations: m.mps.ppe_max_iterations,

@@ -75,3 +75,20 @@ fn golden_final_checkpoint_hashes_on_one_and_two_threads() {
         wrong.join("\n")
     );
 }
+
+#[test]
+fn the_3d_wall_collision_constants_are_manifest_fields_with_todays_values() {
+    let (experiment, sets, golden) = CASES[3];
+    // Written out, today's 3D values (0.8 l0, a second pass) give the pinned bits (another
+    // experiment hash, the same state).
+    let mut explicit = sets.to_vec();
+    explicit.extend([
+        "mps.wall_collision_distance=0.8",
+        "mps.wall_collision_second_pass=true",
+    ]);
+    assert_eq!(final_hash(experiment, &explicit, 2), golden);
+    // Without the second pass the run differs: the field reaches the solver.
+    let mut off = sets.to_vec();
+    off.push("mps.wall_collision_second_pass=false");
+    assert_ne!(final_hash(experiment, &off, 2), golden);
+}

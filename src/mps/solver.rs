@@ -40,6 +40,9 @@ pub struct SolverConfig<const D: usize> {
     /// Collision distance between a fluid and a wall particle (see
     /// [`wall_collision_distance_m`]).
     pub wall_collision_distance_m: f64,
+    /// Collide fluid-wall pairs again after the pressure correction (the manifest's default
+    /// is on in 3D: see [`wall_collision_distance_m`]).
+    pub wall_collision_second_pass: bool,
     pub collision_restitution: f64,
     pub ppe_tolerance: f64,
     pub ppe_max_iterations: u32,
@@ -351,7 +354,7 @@ impl<const D: usize> Solver<D> {
 
         // (4) Correct velocity and position with the pressure gradient.
         self.correct_with_pressure_gradient(dt_s);
-        if D == 3 {
+        if self.config.wall_collision_second_pass {
             // The correction can push a free-surface particle into a gap of the wall lattice
             // (see `wall_collision_distance_m`): fluid-wall pairs collide once more.
             self.collide(dt_s, true);

@@ -55,6 +55,7 @@ pub fn config<const D: usize>(
         compressibility_1_pa: 0.45e-9,
         collision_distance_m: 0.5 * l0,
         wall_collision_distance_m: wall_collision_distance_m(D, 0.5 * l0, l0),
+        wall_collision_second_pass: D == 3,
         collision_restitution: 0.2,
         ppe_tolerance: 1e-9,
         ppe_max_iterations: 5000,
