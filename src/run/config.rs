@@ -1,0 +1,82 @@
+//! The solver's configuration from a manifest and its test's scene.
+use crate::experiment::{Manifest, Scene};
+use crate::manifest::{Fluid, PpePreconditioner, PpeSource};
+use crate::mps::{Rheology, SolverConfig, SourceTerm};
+
+/// The rheology a manifest's fluid section describes, and whether eq. 8's term is on.
+pub fn rheology(fluid: &Fluid) -> (Rheology, bool) {
+    match *fluid {
+        Fluid::Newtonian { viscosity_pa_s, .. } => (Rheology::Newtonian { viscosity_pa_s }, false),
+        Fluid::Bingham {
+            plastic_viscosity_pa_s,
+            yield_stress_pa,
+            critical_strain_rate_1_s,
+            stress_gradient_term,
+            ..
+        } => (
+            Rheology::seed000(
+                plastic_viscosity_pa_s,
+                yield_stress_pa,
+                critical_strain_rate_1_s,
+            ),
+            stress_gradient_term,
+        ),
+        Fluid::BiViscosity {
+            plastic_viscosity_pa_s,
+            yield_stress_pa,
+            rigid_viscosity_pa_s,
+            stress_gradient_term,
+            ..
+        } => (
+            Rheology::bi_viscosity(
+                plastic_viscosity_pa_s,
+                yield_stress_pa,
+                rigid_viscosity_pa_s,
+            ),
+            stress_gradient_term,
+        ),
+    }
+}
+
+/// Solver parameters from the manifest (radii and distances scaled by the spacing).
+pub fn solver_config<const D: usize>(m: &Manifest, scene: &Scene<D>) -> SolverConfig<D> {
+    let (rheology, stress_gradient_term) = rheology(&m.fluid);
+    let l0 = m.spacing_m;
+    SolverConfig {
+        spacing_m: l0,
+        density_kg_m3: m.fluid.density_kg_m3(),
+        rheology,
+        stress_gradient_term,
+        viscosity_tolerance: m.mps.viscosity_tolerance,
+        viscosity_max_iterations: m.mps.viscosity_max_iterations,
+        gravity_m_s2: m.gravity_m_s2,
+        radius_n_m: m.mps.number_density_radius * l0,
+        radius_lap_m: m.mps.laplacian_radius * l0,
+        surface_threshold: m.mps.surface_threshold,
+        relaxation_coefficient: m.mps.relaxation_coefficient,
+        multigrid_ppe: m.mps.ppe_preconditioner == PpePreconditioner::Multigrid,
+        source_term: match m.mps.source_term {
+            PpeSource::NumberDensity => SourceTerm::NumberDensity,
+            PpeSource::Mixed => SourceTerm::Mixed,
+        },
+        compressibility_1_pa: m.mps.compressibility_1_pa,
+        collision_distance_m: m.mps.collision_distance * l0,
+        wall_collision_distance_m: match m.mps.wall_collision_distance {
+            Some(d) => d * l0,
+            None => {
+                crate::mps::solver::wall_collision_distance_m(D, m.mps.collision_distance * l0, l0)
+            }
+        },
+        wall_collision_second_pass: m.mps.wall_collision_second_pass.unwrap_or(D == 3),
+        collision_restitution: m.mps.collision_restitution,
+        ppe_tolerance: m.mps.ppe_tolerance,
+        ppe_max_iterations: m.mps.ppe_max_iterations,
+        courant: m.time.courant,
+        dt_max_s: m.time.dt_max_s,
+        max_speed_m_s: m.stop.max_speed_m_s,
+        domain_min_m: scene.domain_min_m,
+        domain_max_m: scene.domain_max_m,
+        bodies: scene.bodies.clone(),
+        inlets: scene.inlets.clone(),
+    }
+}

@@ -1,0 +1,147 @@
+//! One run: manifest -> test module (scene) -> solver -> MCAP recording.
+//!
+//! `mps/` does one step of the method; this module owns the process around it, in three
+//! parts: [`config`] (the solver's configuration from the manifest), [`time_loop`] (the loop:
+//! output schedules, checkpoints, stop conditions, outcome) and [`frames`] (what one step
+//! records: diagnostics rows and point clouds).
+pub mod config;
+pub mod frames;
+pub mod time_loop;
+
+pub use config::{rheology, solver_config};
+pub use frames::time_ns;
+pub use time_loop::{LoopControl, LoopEnd, LoopStart, Sink, time_loop};
+
+use crate::experiment::{Resolved, build_scene};
+use crate::mps::{Solver, StageTimes};
+use crate::proto::mps::v1::Summary;
+use crate::record::{Outcome, RecordError, Recorder, RunHeader};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
+
+/// How to run (never part of the experiment: none of it changes the state bits).
+#[derive(Debug, Clone, Default)]
+pub struct RunOptions {
+    pub out_dir: PathBuf,
+    /// Worker threads; None = all cores.
+    pub threads: Option<usize>,
+    /// Progress lines on stderr.
+    pub progress: bool,
+    /// Set from outside (signal handler) to stop the run cleanly as "interrupted".
+    pub interrupt: Option<Arc<AtomicBool>>,
+}
+
+/// What a finished run produced.
+#[derive(Debug, Clone)]
+pub struct RunResult {
+    pub path: PathBuf,
+    pub outcome: Outcome,
+    pub summary: Summary,
+    /// See [`LoopEnd::stop_reason`].
+    pub stop_reason: String,
+    /// Wall-clock seconds of the time loop (reported, never recorded).
+    pub wall_time_s: f64,
+    /// Wall-clock seconds per solver stage (reported, never recorded).
+    pub timing: StageTimes,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum RunError {
+    #[error("cannot create output directory {path}: {source}")]
+    OutDir {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("cannot start {threads} worker threads: {message}")]
+    Threads { threads: usize, message: String },
+    #[error(transparent)]
+    Record(#[from] RecordError),
+}
+
+/// File name of a run: `<name>-<first 12 hex of the experiment hash>.mcap`.
+pub fn output_path(out_dir: &Path, resolved: &Resolved) -> PathBuf {
+    out_dir.join(format!(
+        "{}-{}.mcap",
+        resolved.manifest.name,
+        resolved.short_hash()
+    ))
+}
+
+/// Runs the experiment and records it. A simulation that fails (blow-up, solver failure) or
+/// is interrupted still yields a finished MCAP file whose outcome says so: that is an `Ok`
+/// with a non-completed `outcome`. `Err` means the recording itself could not be made.
+pub fn run(resolved: &Resolved, options: &RunOptions) -> Result<RunResult, RunError> {
+    std::fs::create_dir_all(&options.out_dir).map_err(|source| RunError::OutDir {
+        path: options.out_dir.clone(),
+        source,
+    })?;
+    let (pool, threads) = thread_pool(options.threads)?;
+    pool.install(|| match resolved.manifest.dimension {
+        3 => run_in::<3>(resolved, options, threads),
+        _ => run_in::<2>(resolved, options, threads),
+    })
+}
+
+/// A worker pool of `threads` threads (None = all cores), and its size. The split of the work
+/// never depends on it (DESIGN.md section 6).
+pub fn thread_pool(threads: Option<usize>) -> Result<(rayon::ThreadPool, usize), RunError> {
+    let threads =
+        threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .map_err(|e| RunError::Threads {
+            threads,
+            message: e.to_string(),
+        })?;
+    Ok((pool, threads))
+}
+
+/// What a run file records about its experiment (the same for a run and its resumption).
+pub fn run_header(resolved: &Resolved, threads: usize) -> RunHeader<'_> {
+    RunHeader {
+        manifest_source: &resolved.source_text,
+        overrides: &resolved.overrides,
+        canonical: &resolved.canonical,
+        experiment_sha256: &resolved.hash_hex,
+        name: &resolved.manifest.name,
+        threads,
+    }
+}
+
+fn run_in<const D: usize>(
+    resolved: &Resolved,
+    options: &RunOptions,
+    threads: usize,
+) -> Result<RunResult, RunError> {
+    let m = &resolved.manifest;
+    let scene = build_scene::<D>(m);
+    let config = solver_config(m, &scene);
+    let mut solver = Solver::new(config, scene.particles);
+    let path = output_path(&options.out_dir, resolved);
+    let mut recorder = Recorder::create(&path, &run_header(resolved, threads))?;
+    let started = std::time::Instant::now();
+    let control = LoopControl {
+        interrupt: options.interrupt.clone(),
+        progress: options.progress,
+        stop_at_step: None,
+    };
+    let end = time_loop(
+        m,
+        &resolved.hash_hex,
+        &mut solver,
+        LoopStart::default(),
+        &control,
+        &mut recorder,
+    )?;
+    let path = recorder.finish(time_ns(solver.time_s), &end.summary, &end.outcome)?;
+    Ok(RunResult {
+        path,
+        outcome: end.outcome,
+        summary: end.summary,
+        stop_reason: end.stop_reason,
+        wall_time_s: started.elapsed().as_secs_f64(),
+        timing: solver.timing,
+    })
+}

@@ -1,0 +1,272 @@
+//! The time loop shared by runs, resumed runs and replays: output schedules, checkpoints,
+//! stop conditions and the outcome.
+use super::RunError;
+use super::frames::{cloud, diagnostics, time_ns};
+use crate::checkpoint;
+use crate::experiment::{Manifest, experiment_metrics};
+use crate::mps::{ParticleKind, Solver};
+use crate::proto::foxglove::PointCloud;
+use crate::proto::mps::v1::{CheckpointHash, Diagnostics, StateCheckpoint, Summary};
+use crate::record::{Outcome, Recorder};
+use std::collections::BTreeMap;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+/// Emission schedule of one output stream: fires at t = 0, interval, 2 interval, ... (the
+/// first step that reaches each multiple).
+struct Schedule {
+    interval_s: f64,
+    next: u64,
+}
+
+impl Schedule {
+    fn new(interval_s: f64) -> Self {
+        Self {
+            interval_s,
+            next: 0,
+        }
+    }
+    /// The schedule of a run restored at `time_s`, that time already processed: the next
+    /// emission is at the smallest k with k interval > time_s (where [`Schedule::due`] leaves
+    /// it whether or not it fired at `time_s`).
+    fn after(interval_s: f64, time_s: f64) -> Self {
+        let mut next = ((time_s / interval_s) as u64).saturating_sub(2);
+        while time_s >= next as f64 * interval_s {
+            next += 1;
+        }
+        Self { interval_s, next }
+    }
+    fn due(&mut self, time_s: f64) -> bool {
+        if time_s >= self.next as f64 * self.interval_s {
+            while time_s >= self.next as f64 * self.interval_s {
+                self.next += 1;
+            }
+            true
+        } else {
+            false
+        }
+    }
+}
+
+/// Where the time loop's output goes: the [`Recorder`] for a run or a resume, a comparison
+/// with a logged run for a replay (`runner verify`). One loop serves all of them.
+pub trait Sink {
+    /// Whether diagnostics rows and point clouds are wanted (a replay skips building them).
+    fn wants_frames(&self) -> bool {
+        true
+    }
+    fn diagnostics(&mut self, time_ns: u64, msg: &Diagnostics) -> Result<(), RunError>;
+    fn cloud(&mut self, time_ns: u64, msg: &PointCloud) -> Result<(), RunError>;
+    /// A state checkpoint (`msg.index` is its 0-based number in the run, hash filled in).
+    fn checkpoint(&mut self, time_ns: u64, msg: &StateCheckpoint) -> Result<(), RunError>;
+    /// False stops the loop as if interrupted (a replay that found a mismatch).
+    fn keep_going(&self) -> bool {
+        true
+    }
+}
+
+impl Sink for Recorder {
+    fn diagnostics(&mut self, time_ns: u64, msg: &Diagnostics) -> Result<(), RunError> {
+        Ok(self.write_diagnostics(time_ns, msg)?)
+    }
+    fn cloud(&mut self, time_ns: u64, msg: &PointCloud) -> Result<(), RunError> {
+        Ok(self.write_cloud(time_ns, msg)?)
+    }
+    fn checkpoint(&mut self, time_ns: u64, msg: &StateCheckpoint) -> Result<(), RunError> {
+        Ok(self.write_state(time_ns, msg)?)
+    }
+}
+
+/// Where the time loop starts. The default is a fresh run: the solver holds the initial
+/// scene at step 0 and every output stream fires at t = 0.
+#[derive(Debug, Clone, Default)]
+pub struct LoopStart {
+    /// The solver's state was restored from a checkpoint whose time has been processed: the
+    /// output schedules start at the first multiple of their interval after it.
+    pub restored: bool,
+    /// Checkpoints already logged (their hashes go into the summary; the next index follows).
+    pub checkpoints: Vec<CheckpointHash>,
+    /// Step of the last checkpoint already logged, if it holds the solver's current state.
+    pub last_checkpoint_step: Option<u64>,
+}
+
+/// What may stop the loop besides the experiment's own end and stop conditions.
+#[derive(Debug, Clone, Default)]
+pub struct LoopControl {
+    /// Set from outside (signal handler): stop as "interrupted".
+    pub interrupt: Option<Arc<AtomicBool>>,
+    /// Progress lines on stderr.
+    pub progress: bool,
+    /// Stop as "interrupted" once this step is reached (a replay of an interrupted or cut
+    /// short run, or of a segment), at the same point of the loop as a signal would.
+    pub stop_at_step: Option<u64>,
+}
+
+/// How the loop ended: the outcome and the summary (metrics at the last state, every
+/// checkpoint hash).
+#[derive(Debug, Clone)]
+pub struct LoopEnd {
+    pub outcome: Outcome,
+    pub summary: Summary,
+    /// Why a completed run stopped before `time.end_s` (a stop condition), else empty. Not
+    /// recorded: the summary's reason is for failures and interrupts; a stop shows in
+    /// `stop_time_s` and the last diagnostics row.
+    pub stop_reason: String,
+}
+
+/// The time loop: from the solver's current state to the end (or a stop), sending
+/// diagnostics, clouds and checkpoints to `sink` on their schedules, and the final state as
+/// a checkpoint. Every run, resume and replay goes through here, so a replay takes exactly
+/// the steps the run took.
+pub fn time_loop<const D: usize>(
+    m: &Manifest,
+    experiment_sha256: &str,
+    solver: &mut Solver<D>,
+    start: LoopStart,
+    control: &LoopControl,
+    sink: &mut dyn Sink,
+) -> Result<LoopEnd, RunError> {
+    let end_s = m.time.end_s;
+    let schedule = |interval_s: f64| {
+        if start.restored {
+            Schedule::after(interval_s, solver.time_s)
+        } else {
+            Schedule::new(interval_s)
+        }
+    };
+    let mut diag_schedule = schedule(m.output.diagnostics_interval_s);
+    let mut cloud_schedule = schedule(m.output.cloud_interval_s);
+    let mut checkpoint_schedule = schedule(m.output.checkpoint_interval_s);
+    let mut progress_schedule = schedule(end_s / 10.0);
+    let mut checkpoints: Vec<CheckpointHash> = start.checkpoints;
+    let mut last_checkpoint_step: Option<u64> = start.last_checkpoint_step;
+    let mut outcome = Outcome::Completed;
+    let mut stop_reason = String::new();
+    let mut report = None;
+    let mut dt_s = solver.next_dt_s(end_s);
+    let frames = sink.wants_frames();
+    // The rest metric at the previous checkpoint. A restored run starts at a checkpoint, so
+    // its value is that of the restored state: replays and resumed runs stop where the run
+    // did.
+    let mut rest_previous: Option<f64> = match &m.stop.rest_metric {
+        Some(name) if start.restored => Some(experiment_metrics(m, &solver.particles)[name]),
+        _ => None,
+    };
+
+    loop {
+        let t = solver.time_s;
+        if diag_schedule.due(t) && frames {
+            sink.diagnostics(time_ns(t), &diagnostics(m, solver, dt_s, report.as_ref()))?;
+        }
+        if cloud_schedule.due(t) && frames {
+            sink.cloud(time_ns(t), &cloud(solver))?;
+        }
+        if checkpoint_schedule.due(t) {
+            let msg = checkpoint::to_message(checkpoints.len() as u32, solver, dt_s);
+            checkpoints.push(checkpoint::hash_entry(&msg));
+            sink.checkpoint(time_ns(t), &msg)?;
+            last_checkpoint_step = Some(solver.step);
+            if let Some(name) = &m.stop.rest_metric {
+                let value = experiment_metrics(m, &solver.particles)[name];
+                let change = rest_previous.map(|previous| (value - previous).abs());
+                rest_previous = Some(value);
+                if let Some(change) = change
+                    && t >= m.stop.rest_after_s
+                    && change < m.stop.rest_metric_change
+                {
+                    stop_reason = format!(
+                        "settled: {name} changed by {change:.3e} over the last checkpoint interval (stop.rest_metric_change = {})",
+                        m.stop.rest_metric_change
+                    );
+                    break;
+                }
+            }
+        }
+        if control.progress && progress_schedule.due(t) {
+            eprintln!(
+                "{}: t = {:.4} / {} s, step {}",
+                m.name, t, end_s, solver.step
+            );
+        }
+        // Stop when the remaining time is a negligible sliver of a step (float round-off).
+        if end_s - t <= 1e-9 * end_s {
+            break;
+        }
+        if solver.step >= m.stop.max_steps {
+            stop_reason = format!("stop.max_steps = {} reached", m.stop.max_steps);
+            break;
+        }
+        if let Some(flag) = &control.interrupt
+            && flag.load(Ordering::SeqCst)
+        {
+            outcome = Outcome::Interrupted("interrupted by signal".to_string());
+            break;
+        }
+        if let Some(stop) = control.stop_at_step.filter(|&s| solver.step >= s) {
+            outcome = Outcome::Interrupted(format!("stopped at step {stop}"));
+            break;
+        }
+        if !sink.keep_going() {
+            outcome = Outcome::Interrupted("stopped by the output".to_string());
+            break;
+        }
+        match solver.step(dt_s) {
+            Ok(r) => report = Some(r),
+            Err(e) => {
+                outcome = Outcome::Failed(e.to_string());
+                break;
+            }
+        }
+        dt_s = solver.next_dt_s(end_s);
+        if let (Some(share), Some(r)) = (m.stop.non_flowing_fraction, &report)
+            && solver.time_s >= m.stop.non_flowing_after_s
+            && r.non_flowing_fraction >= share
+        {
+            stop_reason = format!(
+                "{:.1} % of the fluid particles are non-flowing (stop.non_flowing_fraction = {share})",
+                100.0 * r.non_flowing_fraction
+            );
+            break;
+        }
+    }
+
+    // The final state is always checkpointed (unless the last step failed mid-way: its
+    // state is not a consistent MPS state, the previous checkpoint stands).
+    let failed = matches!(outcome, Outcome::Failed(_));
+    if !failed && last_checkpoint_step != Some(solver.step) {
+        let msg = checkpoint::to_message(checkpoints.len() as u32, solver, dt_s);
+        checkpoints.push(checkpoint::hash_entry(&msg));
+        sink.checkpoint(time_ns(solver.time_s), &msg)?;
+        if frames {
+            sink.diagnostics(
+                time_ns(solver.time_s),
+                &diagnostics(m, solver, dt_s, report.as_ref()),
+            )?;
+            sink.cloud(time_ns(solver.time_s), &cloud(solver))?;
+        }
+    }
+
+    let p = &solver.particles;
+    let mut metrics: BTreeMap<String, f64> = experiment_metrics(m, p);
+    metrics.insert("particle_count".into(), p.len() as f64);
+    metrics.insert("fluid_particle_count".into(), p.fluid_count() as f64);
+    metrics.insert(
+        "ghost_particle_count".into(),
+        p.count(ParticleKind::Ghost) as f64,
+    );
+    metrics.insert("steps".into(), solver.step as f64);
+    metrics.insert("simulated_time_s".into(), solver.time_s);
+    metrics.insert("stop_time_s".into(), solver.time_s);
+    let summary = Summary {
+        outcome: outcome.as_str().to_string(),
+        reason: outcome.reason().to_string(),
+        metrics: metrics.into_iter().collect(),
+        checkpoints,
+        experiment_sha256: experiment_sha256.to_string(),
+    };
+    Ok(LoopEnd {
+        outcome,
+        summary,
+        stop_reason,
+    })
+}
