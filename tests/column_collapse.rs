@@ -64,6 +64,15 @@ fn bingham_heap_matches_lubrication_closed_form() {
         "still moving: {earlier} -> {heap_length}"
     );
 
+    // The summary carries the measured length and the closed form beside it (for the
+    // fluid's own cross-section: 200 particles of l0^2 = the column's 0.08 m^2).
+    let metrics = &result.summary.metrics;
+    assert_eq!(metrics["heap_length_m"], heap_length);
+    assert!(
+        (metrics["closed_form_heap_length_m"] - length).abs() < 1e-12 * length,
+        "{} vs {length}",
+        metrics["closed_form_heap_length_m"]
+    );
     let error = (heap_length - length) / length;
     eprintln!("heap length {heap_length:.4} m, closed form {length:.4} m, error {error:+.3}");
     assert!(error.abs() < 0.10, "heap length {heap_length} vs {length}");
