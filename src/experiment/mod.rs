@@ -60,11 +60,6 @@ pub trait Experiment {
     );
     /// The summary metric that `runner verify --trend` follows by default.
     fn trend_metric(&self) -> &'static str;
-    /// Extra figures of `runner report`-like commands: files written beside `run_path`
-    /// (none by default; the slump draws its profile through `runner profile`).
-    fn figures(&self, _run_path: &Path) -> Vec<std::path::PathBuf> {
-        Vec::new()
-    }
 }
 
 /// Declares the tests: the [`SceneSpec`] enum (one variant per `scene.kind`) and the one

@@ -13,7 +13,7 @@
 //!   [R(z), R(z) + wall_layers l0) are wall particles, those in the next `dummy_layers` l0
 //!   dummies (z from 0 to the cone height; the cone is open at the top and bottom). Built
 //!   last, so the cone is one index range, which the solver lifts.
-use super::geometry::lattice::{cells, centre, for_each_index};
+use super::geometry::lattice::{cell_volume, cells, centre, for_each_index};
 use super::{Experiment, Manifest, Scene, yield_stress_pa};
 use crate::manifest::validate::{Checker, NON_NEGATIVE, POSITIVE, fmt_num};
 use crate::mps::{ParticleKind, Particles, Path, RigidBody, Vector};
@@ -162,7 +162,7 @@ impl Experiment for Slump {
                 .filter(|&i| on_plate(particles, i, z_max))
                 .count();
             out.insert("fluid_on_plate_count".into(), on_plate as f64);
-            let volume = on_plate as f64 * l0.powi(D as i32);
+            let volume = on_plate as f64 * cell_volume(l0, D);
             let radius = closed_form_radius_m(rho, g, volume, tau);
             out.insert("closed_form_radius_m".into(), radius);
             // The surface at rest at a quarter, half and three quarters of the measured mean
@@ -233,7 +233,7 @@ impl Slump {
         let count = (0..particles.len())
             .filter(|&i| on_plate(particles, i, z_max))
             .count();
-        let volume = count as f64 * l0.powi(3);
+        let volume = count as f64 * cell_volume(l0, 3);
         let closed_form_radius_m = closed_form_radius_m(rho, g, volume, tau);
         let points = (0..)
             .map(|k| k as f64 * l0)

@@ -1,5 +1,5 @@
 //! Solid shapes as the manifest describes them: boxes, spheres, cylinders and frustums, and
-//! their unions and differences (`crate::experiment::geometry::shapes` turns them into geometry).
+//! their unions and differences (the geometry module of the tests, `src/experiment/geometry/shapes.rs`, fills them).
 //!
 //! Every shape is a mapping tagged by `kind`; lengths are in metres and points have one
 //! component per spatial dimension (x, y in 2D; x, y, z in 3D):

@@ -55,7 +55,7 @@ impl<S: SceneSection> Manifest<S> {
 }
 
 /// What the manifest needs to know of a `scene:` section. The sections themselves belong to
-/// the test modules (`crate::experiment`), which implement this trait; the manifest only
+/// the test modules (`src/experiment/`), which implement this trait; the manifest only
 /// parses, checks, canonicalises and hashes them (data flows manifest -> test module).
 pub trait SceneSection:
     Serialize + serde::de::DeserializeOwned + Clone + PartialEq + std::fmt::Debug + 'static

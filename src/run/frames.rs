@@ -1,4 +1,5 @@
 //! What one step records: a diagnostics row and a point cloud of the solver's state.
+use crate::experiment::geometry::lattice::cell_volume;
 use crate::experiment::{Manifest, experiment_metrics};
 use crate::mps::{ParticleKind, Solver};
 use crate::proto::foxglove::PointCloud;
@@ -17,7 +18,7 @@ pub fn diagnostics<const D: usize>(
     report: Option<&crate::mps::StepReport>,
 ) -> Diagnostics {
     let p = &solver.particles;
-    let mass_kg = solver.config.density_kg_m3 * m.spacing_m.powi(D as i32);
+    let mass_kg = solver.config.density_kg_m3 * cell_volume(m.spacing_m, D);
     let mut kinetic = 0.0;
     for i in 0..p.len() {
         if p.kind[i] == ParticleKind::Fluid {

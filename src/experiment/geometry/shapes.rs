@@ -171,7 +171,7 @@ impl<const D: usize> Shape<D> {
                 } else {
                     (0..D)
                         .filter(|&b| b != a)
-                        .map(|b| (x[b] - base_centre_m[b]).powi(2))
+                        .map(|b| (x[b] - base_centre_m[b]) * (x[b] - base_centre_m[b]))
                         .sum::<f64>()
                         .sqrt()
                 };
