@@ -255,13 +255,7 @@ fn viscosity_ratio_1000_is_stable_at_the_seed_time_step() {
     );
     assert_eq!(resolved.manifest.time.dt_max_s, 1e-4);
     let dir = tempfile::tempdir().unwrap();
-    let result = common::run_in(&resolved, dir.path(), 2);
-    assert_eq!(
-        result.outcome,
-        Outcome::Completed,
-        "{}",
-        result.summary.reason
-    );
+    let result = common::run_completed(&resolved, dir.path(), 2);
     assert_eq!(
         result.summary.metrics["steps"], 2000.0,
         "dt stayed at 1e-4 s"

@@ -4,7 +4,7 @@
 mod common;
 use mps_runner::experiment::build_scene;
 use mps_runner::mps::ParticleKind;
-use mps_runner::record::{Outcome, read_run};
+use mps_runner::record::read_run;
 use mps_runner::verify::{VerifyOptions, verify};
 
 /// 120 particles (0.012 m^2 at l0 = 10 mm) in layers of 6 at 1 m/s: the pour lasts 0.2 s,
@@ -25,13 +25,7 @@ fn the_inlet_pours_its_volume_and_stops_and_no_concrete_is_lost() {
     // The column 0.2 m x 0.1 m at 10 mm; neither the rock nor the rod overlaps it.
     assert_eq!(initial_fluid, 200);
     let dir = tempfile::tempdir().unwrap();
-    let result = common::run_in(&resolved, dir.path(), 2);
-    assert_eq!(
-        result.outcome,
-        Outcome::Completed,
-        "{}",
-        result.summary.reason
-    );
+    let result = common::run_completed(&resolved, dir.path(), 2);
     let run = read_run(&result.path).unwrap();
     // Fluid and ghosts (fluid that left the domain) per checkpoint: the count only grows,
     // by whole inlet particles, and stops at round(V / l0^2).
@@ -87,13 +81,7 @@ fn the_rod_follows_its_keyframe_path() {
         "two columns of wall particles, 200 mm high"
     );
     let dir = tempfile::tempdir().unwrap();
-    let result = common::run_in(&resolved, dir.path(), 2);
-    assert_eq!(
-        result.outcome,
-        Outcome::Completed,
-        "{}",
-        result.summary.reason
-    );
+    let result = common::run_completed(&resolved, dir.path(), 2);
     let run = read_run(&result.path).unwrap();
     assert!(run.states.len() > 1000);
     let mut deepest = 0.0f64;

@@ -4,7 +4,7 @@
 mod common;
 use mps_runner::experiment::SceneSpec;
 use mps_runner::manifest::Fluid;
-use mps_runner::record::{Outcome, read_run};
+use mps_runner::record::read_run;
 
 #[test]
 fn bingham_heap_matches_lubrication_closed_form() {
@@ -36,13 +36,7 @@ fn bingham_heap_matches_lubrication_closed_form() {
     let area = column_width_m * column_height_m;
     let length = (1.5 * area).powf(2.0 / 3.0) * (rho * g / (2.0 * tau)).powf(1.0 / 3.0);
     let dir = tempfile::tempdir().unwrap();
-    let result = common::run_in(&resolved, dir.path(), 2);
-    assert_eq!(
-        result.outcome,
-        Outcome::Completed,
-        "{}",
-        result.summary.reason
-    );
+    let result = common::run_completed(&resolved, dir.path(), 2);
     let run = read_run(&result.path).unwrap();
 
     let fluid_positions = |k: usize| -> Vec<(f64, f64)> {

@@ -1,6 +1,6 @@
 //! Newtonian dam break against Martin & Moyce (1952) (DESIGN.md section 5).
 mod common;
-use mps_runner::record::{Outcome, read_run};
+use mps_runner::record::read_run;
 
 /// Martin & Moyce (1952), a = 2.25 in, n^2 = 2: (T, Z) with T = t sqrt(2g/a), Z = z/a.
 fn martin_moyce() -> Vec<(f64, f64)> {
@@ -45,13 +45,7 @@ fn surge_front_follows_martin_and_moyce() {
         if *column_width_m == a_m && *column_height_m == 2.0 * a_m)
     );
     let dir = tempfile::tempdir().unwrap();
-    let result = common::run_in(&resolved, dir.path(), 2);
-    assert_eq!(
-        result.outcome,
-        Outcome::Completed,
-        "{}",
-        result.summary.reason
-    );
+    let result = common::run_completed(&resolved, dir.path(), 2);
 
     let run = read_run(&result.path).unwrap();
     let time_scale = (2.0 * m.gravity_m_s2 / a_m).sqrt();

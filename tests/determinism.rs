@@ -1,6 +1,6 @@
 //! Same manifest + same binary => same state bits, on any thread count (DESIGN.md section 6).
 mod common;
-use mps_runner::record::{Outcome, read_run};
+use mps_runner::record::read_run;
 
 fn checkpoint_hashes(threads: usize, sets: &[&str]) -> (Vec<String>, Vec<Vec<u64>>) {
     experiment_hashes("smoke_2d.yaml", threads, sets)
@@ -13,13 +13,7 @@ fn experiment_hashes(
 ) -> (Vec<String>, Vec<Vec<u64>>) {
     let resolved = common::resolve(experiment, sets);
     let dir = tempfile::tempdir().unwrap();
-    let result = common::run_in(&resolved, dir.path(), threads);
-    assert_eq!(
-        result.outcome,
-        Outcome::Completed,
-        "{}",
-        result.summary.reason
-    );
+    let result = common::run_completed(&resolved, dir.path(), threads);
     let run = read_run(&result.path).unwrap();
     let hashes: Vec<String> = result
         .summary

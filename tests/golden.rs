@@ -3,7 +3,6 @@
 //! a value is re-minted only when a change is meant to alter the simulation, and the commit
 //! that does so says why. Each case runs on 1 and on 2 threads (DESIGN.md section 6).
 mod common;
-use mps_runner::record::Outcome;
 
 /// (experiment file, overrides, final checkpoint SHA-256).
 const CASES: &[(&str, &[&str], &str)] = &[
@@ -40,13 +39,7 @@ const CASES: &[(&str, &[&str], &str)] = &[
 fn final_hash(experiment: &str, sets: &[&str], threads: usize) -> String {
     let resolved = common::resolve(experiment, sets);
     let dir = tempfile::tempdir().unwrap();
-    let result = common::run_in(&resolved, dir.path(), threads);
-    assert_eq!(
-        result.outcome,
-        Outcome::Completed,
-        "{}",
-        result.summary.reason
-    );
+    let result = common::run_completed(&resolved, dir.path(), threads);
     result
         .summary
         .checkpoints

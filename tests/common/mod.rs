@@ -29,3 +29,16 @@ pub fn run_in(resolved: &Resolved, out_dir: &Path, threads: usize) -> RunResult 
     )
     .expect("run")
 }
+
+/// Runs and asserts that the run completed (its reason otherwise).
+pub fn run_completed(resolved: &Resolved, out_dir: &Path, threads: usize) -> RunResult {
+    let result = run_in(resolved, out_dir, threads);
+    assert_eq!(
+        result.outcome,
+        mps_runner::record::Outcome::Completed,
+        "{}: {}",
+        resolved.manifest.name,
+        result.summary.reason
+    );
+    result
+}
