@@ -15,6 +15,7 @@
 
 pub mod boundaries;
 pub mod canonical;
+pub mod checker;
 mod error;
 mod locate;
 mod overrides;

@@ -11,7 +11,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::boundaries::Boundaries;
-use super::validate::Checker;
+use super::checker::Checker;
 
 /// A complete experiment description.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -3,8 +3,7 @@
 use super::shapes::{Shape, fill_walls};
 use crate::mps::{Particles, Vector};
 
-/// A box of lattice cells, lo..hi (hi exclusive) on every axis.
-pub type CellBox<const D: usize> = ([i64; D], [i64; D]);
+pub use super::lattice::CellBox;
 
 /// Adds the wall particles of a container whose inside is the union of `interior` boxes:
 /// every cell within `wall_layers + dummy_layers` cells of the inside (Chebyshev distance, the

@@ -1,6 +1,9 @@
 //! Cell-centred lattice helpers shared by the scene builders.
 use crate::mps::Vector;
 
+/// A box of lattice cells, lo..hi (hi exclusive) on every axis.
+pub type CellBox<const D: usize> = ([i64; D], [i64; D]);
+
 /// Number of whole cells of size `spacing_m` in `length_m` (rounded, at least 1).
 pub fn cells(length_m: f64, spacing_m: f64) -> i64 {
     ((length_m / spacing_m).round() as i64).max(1)

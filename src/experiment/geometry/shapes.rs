@@ -5,8 +5,7 @@
 //! surface a point lies), negative outside. A lattice cell whose centre lies at depth d > 0
 //! is in layer ceil(d / l0): layers 1..=wall_layers hold wall particles, the next
 //! dummy_layers dummies, deeper cells nothing.
-use super::container::CellBox;
-use super::lattice::{centre, for_each_index};
+use super::lattice::{CellBox, centre, for_each_index};
 use crate::manifest::shape::ShapeSpec;
 use crate::mps::{ParticleKind, Particles, Vector};
 
