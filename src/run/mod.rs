@@ -1,16 +1,16 @@
 //! One run: manifest -> test module (scene) -> solver -> MCAP recording.
 //!
 //! `mps/` does one step of the method; this module owns the process around it, in three
-//! parts: [`config`] (the solver's configuration from the manifest), [`time_loop`] (the loop:
+//! parts: [`config`] (the solver's configuration from the manifest), [`driver`] (the time loop:
 //! output schedules, checkpoints, stop conditions, outcome) and [`frames`] (what one step
 //! records: diagnostics rows and point clouds).
 pub mod config;
+pub mod driver;
 pub mod frames;
-pub mod time_loop;
 
 pub use config::{rheology, solver_config};
+pub use driver::{LoopControl, LoopEnd, LoopStart, Sink, time_loop};
 pub use frames::time_ns;
-pub use time_loop::{LoopControl, LoopEnd, LoopStart, Sink, time_loop};
 
 use crate::experiment::{Resolved, build_scene};
 use crate::mps::{Solver, StageTimes};
