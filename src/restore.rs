@@ -111,6 +111,20 @@ pub fn restore_solver<const D: usize>(
     let scene = build_scene::<D>(m);
     let config = solver_config(m, &scene);
     let solver = checkpoint::solver_from_message::<D>(config, msg)?;
+    // Particles are only ever added (by inlets, at the end): the scene's particles plus those
+    // poured, or the bodies' index ranges would point at the wrong particles.
+    let expected = scene.particles.len() as u64 + solver.inlet_emitted.iter().sum::<u64>();
+    if solver.particles.len() as u64 != expected {
+        return Err(format!(
+            "checkpoint {} (step {}, t = {} s) holds {} particles, but the scene has {} and its inlets poured {}",
+            msg.index,
+            msg.step,
+            msg.time_s,
+            solver.particles.len(),
+            scene.particles.len(),
+            expected - scene.particles.len() as u64
+        ));
+    }
     let dt = solver.next_dt_s(m.time.end_s);
     if dt.to_bits() != msg.dt_s.to_bits() {
         return Err(format!(

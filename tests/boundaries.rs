@@ -141,3 +141,90 @@ fn a_mid_pour_checkpoint_replays_bit_for_bit_and_threads_agree() {
     let report = verify(&two.path, &VerifyOptions::default()).unwrap();
     assert!(report.passed(), "{report}");
 }
+
+#[test]
+fn bad_boundaries_are_refused_naming_the_field() {
+    // Each would otherwise allocate without bound, never end, or cross the fluid in a step.
+    let cases: &[(&str, &str)] = &[
+        (
+            "boundaries.inlets.0.diameter_m=200",
+            "boundaries.inlets.0: must lie inside the domain box",
+        ),
+        (
+            "boundaries.inlets.0.diameter_m=1e300",
+            "boundaries.inlets.0: must lie inside the domain box",
+        ),
+        (
+            "boundaries.inlets.0.diameter_m=0.001",
+            "holds no lattice point",
+        ),
+        (
+            "boundaries.inlets.0.direction.0=nope",
+            "boundaries.inlets.0.direction.0",
+        ),
+        (
+            "boundaries.inlets.0.volume_m3=0",
+            "boundaries.inlets.0.volume_m3: must be > 0",
+        ),
+        (
+            "boundaries.inlets.0.clearance=2",
+            "boundaries.inlets.0.clearance: must be in [0.5, 1]",
+        ),
+        (
+            "boundaries.obstacles.0.centre_m.0=1e5",
+            "boundaries.obstacles.0: must lie inside the domain box",
+        ),
+        (
+            "boundaries.obstacles.0.radius_m=1e12",
+            "boundaries.obstacles.0: must lie inside the domain box",
+        ),
+        (
+            "boundaries.obstacles.0.radius_m=-1",
+            "boundaries.obstacles.0.radius_m",
+        ),
+        (
+            "boundaries.bodies.0.keyframes.1.offset_m.1=-1e5",
+            "boundaries.bodies.0.keyframes.1.offset_m: puts the body outside the domain",
+        ),
+        (
+            "boundaries.bodies.0.keyframes.1.time_s=0.21",
+            "boundaries.bodies.0.keyframes.1: the body moves at",
+        ),
+        (
+            "boundaries.bodies.0.keyframes.1.time_s=0.1",
+            "keyframe times must increase strictly",
+        ),
+        (
+            "boundaries.bodies.0.repeat_s=0.5",
+            "boundaries.bodies.0.repeat_s",
+        ),
+        ("boundaries.tags.0.tag=70000", "boundaries.tags.0.tag"),
+        ("boundaries.inlets.1.tag=1", "is a list of 1 items"),
+    ];
+    let text = std::fs::read_to_string(common::experiment("pour_2d.yaml")).unwrap();
+    for (set, fragment) in cases {
+        let err = mps_runner::experiment::from_str(&text, "pour_2d.yaml", &[set.to_string()])
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains(fragment), "--set {set}: {err}");
+    }
+}
+
+#[test]
+fn an_obstacle_on_the_tank_floor_adds_no_particle_twice() {
+    // A box sunk into the floor: its wall cells there are the tank's own.
+    let resolved = common::resolve("pour_2d.yaml", &[]);
+    let mut m = resolved.manifest.clone();
+    m.boundaries.obstacles = vec![mps_runner::manifest::shape::ShapeSpec::Box {
+        min_m: vec![0.25, -0.05],
+        max_m: vec![0.35, 0.04],
+    }];
+    let p = build_scene::<2>(&m).particles;
+    let mut seen = std::collections::BTreeSet::new();
+    for x in &p.position_m {
+        assert!(
+            seen.insert((x[0].to_bits(), x[1].to_bits())),
+            "two particles at {x:?}"
+        );
+    }
+}

@@ -15,6 +15,8 @@ fn inlet<const D: usize>(centre_m: Vector<D>, radius_m: f64, volume_m3: f64) -> 
         volume_m3,
         start_s: 0.01,
         tag: 4,
+        // 0.9 l0 at the spacing every test here uses (20 mm).
+        clearance_m: 0.9 * 0.02,
     }
 }
 

@@ -8,20 +8,30 @@ use crate::manifest::validate::Checker;
 use crate::mps::{Inlet, ParticleKind, Particles, Path, RigidBody, Vector};
 use std::collections::BTreeSet;
 
+/// The domain box of the test's own scene (before the section is added).
+pub struct Domain<'a, const D: usize> {
+    pub min_m: &'a Vector<D>,
+    pub max_m: &'a Vector<D>,
+}
+
 fn vector<const D: usize>(v: &[f64]) -> Vector<D> {
     Vector::<D>::from_fn(|a, _| v[a])
 }
 
-/// The core's inlet for a manifest inlet (direction normalised by the core).
-pub fn inlet<const D: usize>(spec: &InletSpec) -> Inlet<D> {
+/// The core's inlet for a manifest inlet.
+pub fn inlet<const D: usize>(spec: &InletSpec, spacing_m: f64) -> Inlet<D> {
+    // Scaled by its largest component first, so that no length under- or overflows.
+    let direction = vector::<D>(&spec.direction);
+    let largest = direction.amax();
     Inlet {
         centre_m: vector(&spec.centre_m),
-        direction: vector::<D>(&spec.direction).normalize(),
+        direction: (direction / largest).normalize(),
         radius_m: 0.5 * spec.diameter_m,
         speed_m_s: spec.speed_m_s,
         volume_m3: spec.volume_m3,
         start_s: spec.start_s,
         tag: spec.tag,
+        clearance_m: spec.clearance * spacing_m,
     }
 }
 
@@ -32,34 +42,75 @@ pub fn path<const D: usize>(body: &Body) -> Result<Path<D>, String> {
     Path::from_keyframes(&times, &offsets, body.repeat_s)
 }
 
-/// Checks that need the spacing and the core (after the section's own checks passed): an
-/// inlet's opening must hold a lattice point, a path must be one the core accepts.
-pub fn check(m: &Manifest, c: &mut Checker) {
+/// Checks that need the test's scene and the core, once the manifest passed every other
+/// check: every solid (a body at each of its keyframes) and every inlet lies inside the
+/// domain box (so no input can make the lattice scans or the neighbour grid grow without
+/// bound), a body moves at most `time.courant` spacings per `time.dt_max_s` (its speed is
+/// not in the CFL step), an inlet's opening holds a lattice point, a path is one the core
+/// accepts.
+pub fn check<const D: usize>(m: &Manifest, domain: Domain<'_, D>, c: &mut Checker) {
     let b = &m.boundaries;
-    if b.is_empty()
-        || !super::spacing_ok(m)
-        || !matches!(m.dimension, 2 | 3)
-        || !crate::manifest::boundaries::check(b, m.dimension as usize).is_empty()
-    {
-        return;
-    }
     let l0 = m.spacing_m;
-    for (i, spec) in b.inlets.iter().enumerate() {
-        let result = match m.dimension {
-            3 => inlet::<3>(spec).validate(l0),
-            _ => inlet::<2>(spec).validate(l0),
-        };
-        if let Err(message) = result {
-            c.fail(&format!("boundaries.inlets.{i}"), message);
+    let inside = |lo: Vector<D>, hi: Vector<D>| {
+        (0..D).all(|a| lo[a] >= domain.min_m[a] && hi[a] <= domain.max_m[a])
+    };
+    let describe = format!(
+        "must lie inside the domain box {:?} to {:?} m (the test's scene and its surroundings)",
+        domain.min_m.as_slice(),
+        domain.max_m.as_slice()
+    );
+    let bounds = |s: &Shape<D>| {
+        s.cell_bounds(l0).map(|(lo, hi)| {
+            (
+                Vector::<D>::from_fn(|a, _| lo[a] as f64 * l0),
+                Vector::<D>::from_fn(|a, _| hi[a] as f64 * l0),
+            )
+        })
+    };
+    for (i, spec) in b.obstacles.iter().enumerate() {
+        if bounds(&Shape::from_spec(spec)).is_none_or(|(lo, hi)| !inside(lo, hi)) {
+            c.fail(&format!("boundaries.obstacles.{i}"), describe.clone());
         }
     }
     for (i, body) in b.bodies.iter().enumerate() {
-        let result = match m.dimension {
-            3 => path::<3>(body).map(drop),
-            _ => path::<2>(body).map(drop),
-        };
-        if let Err(message) = result {
-            c.fail(&format!("boundaries.bodies.{i}.keyframes"), message);
+        let at = format!("boundaries.bodies.{i}");
+        let shape = Shape::<D>::from_spec(&body.shape);
+        for (k, key) in body.keyframes.iter().enumerate() {
+            let moved = shape.translated(&vector(&key.offset_m));
+            if bounds(&moved).is_none_or(|(lo, hi)| !inside(lo, hi)) {
+                c.fail(
+                    &format!("{at}.keyframes.{k}.offset_m"),
+                    format!("puts the body outside the domain: it {describe}"),
+                );
+            }
+            if k > 0 {
+                let before = &body.keyframes[k - 1];
+                let step_m = (vector::<D>(&key.offset_m) - vector::<D>(&before.offset_m)).norm();
+                let speed = step_m / (key.time_s - before.time_s);
+                let limit = m.time.courant * l0 / m.time.dt_max_s;
+                if speed > limit {
+                    c.fail(
+                        &format!("{at}.keyframes.{k}"),
+                        format!(
+                            "the body moves at {speed:.4} m/s from keyframe {} to {k}, faster than time.courant * spacing_m / time.dt_max_s = {limit:.4} m/s (a step would carry it past the fluid): slow it down or lower time.dt_max_s",
+                            k - 1
+                        ),
+                    );
+                }
+            }
+        }
+        if let Err(message) = path::<D>(body) {
+            c.fail(&format!("{at}.keyframes"), message);
+        }
+    }
+    for (i, spec) in b.inlets.iter().enumerate() {
+        let at = format!("boundaries.inlets.{i}");
+        let core = inlet::<D>(spec, l0);
+        let r = Vector::<D>::repeat(core.radius_m);
+        if !inside(core.centre_m - r, core.centre_m + r) {
+            c.fail(&at, describe.clone());
+        } else if let Err(message) = core.validate(l0) {
+            c.fail(&at, message);
         }
     }
 }
@@ -134,12 +185,18 @@ pub fn apply<const D: usize>(m: &Manifest, scene: &mut Scene<D>) {
         retain(p, &keep, &mut scene.bodies);
     }
 
+    // Cells that already hold a wall or dummy particle (the test's walls, earlier solids)
+    // are not filled twice.
+    let mut taken: BTreeSet<Vec<u64>> = (0..p.len())
+        .filter(|&i| p.kind[i] != ParticleKind::Fluid)
+        .map(|i| key(&p.position_m[i]))
+        .collect();
     for solid in &obstacles {
-        fill(p, solid, spacing_m, walls, dummies);
+        fill(p, solid, spacing_m, walls, dummies, &mut taken);
     }
     for (solid, path) in bodies.iter().zip(paths) {
         let first = p.len();
-        fill(p, solid, spacing_m, walls, dummies);
+        fill(p, solid, spacing_m, walls, dummies, &mut taken);
         scene.bodies.push(RigidBody {
             first,
             end: p.len(),
@@ -148,18 +205,34 @@ pub fn apply<const D: usize>(m: &Manifest, scene: &mut Scene<D>) {
     }
     scene
         .inlets
-        .extend(b.inlets.iter().map(|spec| inlet::<D>(spec)));
+        .extend(b.inlets.iter().map(|spec| inlet::<D>(spec, spacing_m)));
 }
 
+/// The bits of a position (lattice cell centres are computed the same way everywhere, so
+/// equal cells give equal bits).
+fn key<const D: usize>(x: &Vector<D>) -> Vec<u64> {
+    x.iter().map(|v| v.to_bits()).collect()
+}
+
+/// Fills `solid` with wall and dummy layers, leaving out cells in `taken` (and adding the
+/// new ones to it).
 fn fill<const D: usize>(
     p: &mut Particles<D>,
     solid: &Shape<D>,
     spacing_m: f64,
     walls: u32,
     dummies: u32,
+    taken: &mut BTreeSet<Vec<u64>>,
 ) {
-    if let Some(scan) = solid.cell_bounds(spacing_m) {
-        fill_walls(p, solid, scan, spacing_m, walls, dummies);
+    let Some(scan) = solid.cell_bounds(spacing_m) else {
+        return;
+    };
+    let mut filled = Particles::<D>::default();
+    fill_walls(&mut filled, solid, scan, spacing_m, walls, dummies);
+    for i in 0..filled.len() {
+        if taken.insert(key(&filled.position_m[i])) {
+            p.push(filled.position_m[i], filled.kind[i]);
+        }
     }
 }
 

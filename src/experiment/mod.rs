@@ -110,7 +110,19 @@ impl SceneSection for SceneSpec {
     }
     fn check(&self, m: &Manifest, c: &mut Checker) {
         with_experiment!(self, e => e.check(m, c));
-        boundaries::check(m, c);
+        // The boundaries section is checked against the test's scene, which is built only
+        // from a manifest that passed everything else.
+        if m.boundaries.is_empty()
+            || !c.is_clean()
+            || !crate::manifest::boundaries::check(&m.boundaries, m.dimension as usize).is_empty()
+        {
+            return;
+        }
+        match m.dimension {
+            2 => check_boundaries::<2>(self, m, c),
+            3 => check_boundaries::<3>(self, m, c),
+            _ => {}
+        }
     }
     fn metric_names(&self, m: &Manifest) -> Vec<String> {
         metric_names(m)
@@ -118,6 +130,15 @@ impl SceneSection for SceneSpec {
     fn samples() -> Vec<Self> {
         Self::all_defaults()
     }
+}
+
+fn check_boundaries<const D: usize>(spec: &SceneSpec, m: &Manifest, c: &mut Checker) {
+    let scene: Scene<D> = with_experiment!(spec, e => e.build::<D>(m));
+    let domain = boundaries::Domain {
+        min_m: &scene.domain_min_m,
+        max_m: &scene.domain_max_m,
+    };
+    boundaries::check(m, domain, c);
 }
 
 impl SceneSpec {

@@ -13,9 +13,10 @@
 //!   [R(z), R(z) + wall_layers l0) are wall particles, those in the next `dummy_layers` l0
 //!   dummies (z from 0 to the cone height; the cone is open at the top and bottom). Built
 //!   last, so the cone is one index range, which the solver lifts.
-use super::geometry::lattice::{cell_volume, cells, centre, for_each_index};
+use super::geometry::lattice::{cells, centre, for_each_index};
 use super::{Experiment, Manifest, Scene, yield_stress_pa};
 use crate::manifest::validate::{Checker, NON_NEGATIVE, POSITIVE, fmt_num};
+use crate::mps::particles::cell_volume;
 use crate::mps::{ParticleKind, Particles, Path, RigidBody, Vector};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;

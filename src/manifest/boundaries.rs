@@ -76,6 +76,15 @@ pub struct Inlet {
     /// Tag of the poured particles.
     #[serde(default)]
     pub tag: u16,
+    /// A due layer enters only once no fluid is closer than this to its points (units of
+    /// spacing): the layer before has moved on. Below 1 so that a layer that entered up to a
+    /// step late does not hold the next one back; it bounds how densely layers can pack.
+    #[serde(default = "default_clearance")]
+    pub clearance: f64,
+}
+
+fn default_clearance() -> f64 {
+    0.9
 }
 
 /// Initial fluid inside `region` gets `tag`.
@@ -201,6 +210,15 @@ fn check_inlet(inlet: &Inlet, d: usize, at: &str, out: &mut Vec<(String, String)
         if !(x.is_finite() && x > min) {
             out.push((format!("{at}.{name}"), format!("must be > 0, got {x:?}")));
         }
+    }
+    if !(inlet.clearance.is_finite() && inlet.clearance >= 0.5 && inlet.clearance <= 1.0) {
+        out.push((
+            format!("{at}.clearance"),
+            format!(
+                "must be in [0.5, 1] (units of spacing), got {:?}",
+                inlet.clearance
+            ),
+        ));
     }
     if !(inlet.start_s.is_finite() && inlet.start_s >= 0.0) {
         out.push((

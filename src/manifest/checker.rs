@@ -94,6 +94,10 @@ impl Checker {
     pub fn new() -> Self {
         Self { issues: Vec::new() }
     }
+    /// No issue so far.
+    pub fn is_clean(&self) -> bool {
+        self.issues.is_empty()
+    }
     /// The issues found, in the order they were reported.
     pub fn into_issues(self) -> Vec<Issue> {
         self.issues

@@ -4,7 +4,7 @@
 //! cross-section. Its only state is how many particles it has poured so far (kept by the
 //! solver and recorded in the checkpoint); everything else follows from the configuration.
 //! Only `+ - * /`, `sqrt` and comparisons are used (DESIGN.md section 6).
-use super::particles::Vector;
+use super::particles::{Vector, cell_volume};
 
 /// An opening through which fluid enters at a constant speed.
 ///
@@ -33,11 +33,9 @@ pub struct Inlet<const D: usize> {
     pub start_s: f64,
     /// Tag of the poured particles (layer, material, origin).
     pub tag: u16,
-}
-
-/// l0^D by repeated multiplication (no `powi`/`powf` in the state path).
-fn cell_volume<const D: usize>(spacing_m: f64) -> f64 {
-    (0..D).fold(1.0, |v, _| v * spacing_m)
+    /// A due layer enters only when no fluid particle is closer than this to any of its
+    /// points (the layer before it has moved on, the opening is not blocked).
+    pub clearance_m: f64,
 }
 
 impl<const D: usize> Inlet<D> {
@@ -82,7 +80,7 @@ impl<const D: usize> Inlet<D> {
 
     /// Number of particles the inlet pours in all: round(volume / l0^D).
     pub fn total_count(&self, spacing_m: f64) -> u64 {
-        let n = (self.volume_m3 / cell_volume::<D>(spacing_m)).round();
+        let n = (self.volume_m3 / cell_volume(spacing_m, D)).round();
         if n > 0.0 { n as u64 } else { 0 }
     }
 

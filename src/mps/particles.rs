@@ -3,6 +3,12 @@ use nalgebra::SVector;
 
 pub type Vector<const D: usize> = SVector<f64, D>;
 
+/// Volume of one lattice cell, l0^D (m^3 in 3D, m^2 per metre of depth in 2D), as a
+/// product: the same bits as `powi`, without a function whose result may vary by platform.
+pub fn cell_volume(spacing_m: f64, dimension: usize) -> f64 {
+    (0..dimension).fold(1.0, |v, _| v * spacing_m)
+}
+
 /// What a particle is. The discriminants are part of the recorded state (`kind` field).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[repr(u32)]

@@ -227,14 +227,16 @@ impl<const D: usize> Solver<D> {
     }
 
     /// Time step from the CFL condition (Courant number on the largest speed) and dt_max, never
-    /// past `end_time_s`. Viscosity is implicit, so it sets no limit. An inlet that has not
-    /// finished pouring counts with its inflow speed (its next layer enters at that speed).
+    /// past `end_time_s`. Viscosity is implicit, so it sets no limit. An inlet that pours
+    /// during the next step (started or starting within dt_max, not finished) counts with its
+    /// inflow speed.
     pub fn next_dt_s(&self, end_time_s: f64) -> f64 {
         let c = &self.config;
         let mut dt = c.dt_max_s;
         let mut speed = self.max_fluid_speed_m_s();
         for (inlet, &emitted) in c.inlets.iter().zip(&self.inlet_emitted) {
-            if emitted < inlet.total_count(c.spacing_m) {
+            if emitted < inlet.total_count(c.spacing_m) && self.time_s + c.dt_max_s >= inlet.start_s
+            {
                 speed = speed.max(inlet.speed_m_s);
             }
         }
@@ -695,12 +697,11 @@ impl<const D: usize> Solver<D> {
     }
 
     /// Inlets, in order: the next layer of each unfinished inlet whose due time has come is
-    /// appended at the end of the particle arrays, unless a fluid particle lies within
-    /// 0.5 l0 of one of its positions (then the inlet waits). At most one layer per inlet per
+    /// appended at the end of the particle arrays, unless a fluid particle lies within the
+    /// inlet's clearance of one of its positions (then the inlet waits). At most one layer per inlet per
     /// step: a second due layer would sit on the first one, which blocks it.
     fn pour(&mut self) {
         let l0 = self.config.spacing_m;
-        let clearance2 = 0.25 * l0 * l0;
         for k in 0..self.config.inlets.len() {
             let inlet = &self.config.inlets[k];
             let section = &self.inlet_sections[k];
@@ -716,7 +717,8 @@ impl<const D: usize> Solver<D> {
             let count = section.len().min((total - emitted) as usize);
             let points = &section[..count];
             // Only fluid near the opening can block it: skip the rest with one distance.
-            let reach = inlet.radius_m + 0.5 * l0;
+            let clearance2 = inlet.clearance_m * inlet.clearance_m;
+            let reach = inlet.radius_m + inlet.clearance_m;
             let p = &self.particles;
             let blocked = (0..p.len()).any(|i| {
                 p.kind[i] == ParticleKind::Fluid

@@ -1,6 +1,6 @@
 //! What one step records: a diagnostics row and a point cloud of the solver's state.
-use crate::experiment::geometry::lattice::cell_volume;
 use crate::experiment::{Manifest, experiment_metrics};
+use crate::mps::particles::cell_volume;
 use crate::mps::{ParticleKind, Solver};
 use crate::proto::foxglove::PointCloud;
 use crate::proto::mps::v1::Diagnostics;

@@ -9,12 +9,6 @@ pub fn cells(length_m: f64, spacing_m: f64) -> i64 {
     ((length_m / spacing_m).round() as i64).max(1)
 }
 
-/// Volume of one lattice cell, l0^D (m^3 in 3D, m^2 per metre of depth in 2D), as a
-/// product: the same bits as `powi`, without a function whose result may vary by platform.
-pub fn cell_volume(spacing_m: f64, dimension: usize) -> f64 {
-    (0..dimension).fold(1.0, |v, _| v * spacing_m)
-}
-
 /// Centre of lattice cell `index` (particles sit at (k + 1/2) l0 so that a box [0, L] holds
 /// whole particles and walls start half a spacing outside it).
 pub fn centre<const D: usize>(index: [i64; D], spacing_m: f64) -> Vector<D> {
