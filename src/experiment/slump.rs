@@ -199,7 +199,7 @@ pub struct ProfilePoint {
 
 /// The surface at rest of a slump-flow run against the closed form: measured mean spread
 /// radius, closed-form radius for the concrete's volume, and h(r) every spacing from the axis
-/// to the measured radius.
+/// to the measured radius (where a particle centre lies within l0/2 of r).
 #[derive(Debug, Clone, PartialEq)]
 pub struct SlumpProfile {
     pub time_s: f64,
@@ -244,6 +244,9 @@ impl Slump {
                 measured_m: surface_height_m(particles, l0, r, 0.5 * l0, z_max),
                 closed_form_m: closed_form_height_m(rho, g, tau, radius_m, r),
             })
+            // A band that holds no particle centre has no surface to report (at r = 0 on an
+            // unmoved lattice the nearest centres lie 0.71 l0 from the axis).
+            .filter(|q| q.measured_m > 0.0)
             .collect();
         Ok(SlumpProfile {
             time_s,
