@@ -35,11 +35,12 @@ fn cross_sections_are_cell_centred_lattices() {
     );
     for x in &points {
         assert_eq!(x[2], 0.25);
+        // u, v in units of l0: round-off of order 1e-14.
         let (u, v) = ((x[0] - 0.12) / l0, (x[1] - 0.12) / l0);
         assert!((u - u.round() - 0.5).abs() < 1e-9 || (u - u.round() + 0.5).abs() < 1e-9);
         assert!((v - v.round() - 0.5).abs() < 1e-9 || (v - v.round() + 0.5).abs() < 1e-9);
     }
-    // The four centre points come first.
+    // The four centre points come first (at +-l0/2; round-off of order 1e-17 m).
     for x in &points[..4] {
         assert!(((x[0] - 0.12).abs() - 0.01).abs() < 1e-12);
         assert!(((x[1] - 0.12).abs() - 0.01).abs() < 1e-12);
@@ -49,7 +50,8 @@ fn cross_sections_are_cell_centred_lattices() {
     // u = +-0.01, +-0.03, +-0.05 (the ends of the segment count).
     assert_eq!(points.len(), 6);
     assert!((points[0][0] - 0.14).abs() < 1e-12 && (points[1][0] - 0.16).abs() < 1e-12);
-    // A slanted inlet: every point in the plane, within the radius, l0 from its nearest.
+    // A slanted inlet: every point in the plane, within the radius, l0 from its nearest (an
+    // orthonormal basis built from (1, -2, -2)/3: round-off of order 1e-16 m).
     let mut slanted = down.clone();
     slanted.direction = Vector::<3>::new(1.0, -2.0, -2.0) / 3.0;
     let points = slanted.cross_section_m(l0);
@@ -75,20 +77,19 @@ fn cross_sections_are_cell_centred_lattices() {
 /// A box with a shallow pool and an inlet pouring `volume_m3` downwards from near its top;
 /// the run goes on until `end_s`. Checks the count, the volume, the tags, and that a copy
 /// restored from the first checkpoint taken mid-pour ends bit for bit where the run does.
-fn pours<const D: usize>(cells: [i64; D], l0: f64, inlet: Inlet<D>, end_s: f64) {
+fn pours<const D: usize>(cells: [i64; D], l0: f64, inlet: Inlet<D>, end_s: f64, count: u64) {
     let (p, lo, hi) = walled_box::<D>(l0, cells, 2);
     let initial = p.fluid_count();
     let initial_len = p.len();
     let mut c = config::<D>(l0, lo, hi);
-    let volume = inlet.volume_m3;
     let total = inlet.total_count(l0);
     let per_layer = inlet.cross_section_m(l0).len() as u64;
     assert!(
         total > 2 * per_layer && !total.is_multiple_of(per_layer),
         "test needs a partial layer"
     );
-    let cell = (0..D).fold(1.0, |v, _| v * l0);
-    assert!((total as f64 * cell - volume).abs() <= cell);
+    // The count derived by hand in the caller (round(V / l0^D)).
+    assert_eq!(total, count);
     c.inlets = vec![inlet];
     let mut solver = Solver::new(c.clone(), p);
     let mut restored: Option<Solver<D>> = None;
@@ -135,6 +136,15 @@ fn inlet_pours_its_volume_and_stops_2d() {
         l0,
         inlet::<2>(Vector::<2>::new(0.12, 0.26), 0.05, volume),
         0.4,
+        14,
+    );
+    // 14.7 l0^2 rounds up: 15 particles (a floor would give 14).
+    pours::<2>(
+        [12, 16],
+        l0,
+        inlet::<2>(Vector::<2>::new(0.12, 0.26), 0.05, 14.7 * l0 * l0),
+        0.4,
+        15,
     );
 }
 
@@ -148,6 +158,7 @@ fn inlet_pours_its_volume_and_stops_3d() {
         l0,
         inlet::<3>(Vector::<3>::new(0.12, 0.12, 0.26), 0.05, volume),
         0.35,
+        56,
     );
 }
 
