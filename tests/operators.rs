@@ -29,6 +29,7 @@ fn n0_and_lambda_match_hand_sums_in_2d() {
     let refs = RefValues::on_lattice::<2>(l0, 2.1 * l0, 3.1 * l0);
     // re = 2.1: neighbours at 1 (x4), sqrt 2 (x4), 2 (x4) spacings.
     let n0 = 4.0 * (2.1 - 1.0) + 4.0 * (2.1 / 2f64.sqrt() - 1.0) + 4.0 * (2.1 / 2.0 - 1.0);
+    // A 12-term sum of values below 1.1: round-off of order 1e-15.
     assert!((refs.n0 - n0).abs() < 1e-12, "{} vs {}", refs.n0, n0);
     // re = 3.1 adds sqrt5 (x8), sqrt8 (x4), 3 (x4).
     let shells: [(f64, f64); 6] = [
@@ -45,6 +46,8 @@ fn n0_and_lambda_match_hand_sums_in_2d() {
         sw += m * w;
         swr2 += m * w * (r * l0) * (r * l0);
     }
+    // 24-term sums: round-off of order 1e-14 on n0 (about 19) and 1e-19 m^2 on lambda
+    // (about 2.5e-4 m^2).
     assert!((refs.n0_lap - sw).abs() < 1e-12);
     assert!((refs.lambda_m2 - swr2 / sw).abs() < 1e-18);
     assert_eq!(weight(3.1 * l0, 3.1 * l0), 0.0, "w vanishes at re");
@@ -58,6 +61,8 @@ fn check_operators<const D: usize>() {
 
     // Number density of an interior particle equals n0.
     let n = number_density(&pos, &nb, mid, refs.radius_n_m, |_| true);
+    // The same sum as n0 from displacements that differ by the rounding of positions away
+    // from the origin: relative round-off of order 1e-15.
     assert!(
         (n - refs.n0).abs() < 1e-12 * refs.n0,
         "n = {n}, n0 = {}",
@@ -70,6 +75,8 @@ fn check_operators<const D: usize>() {
     let g = gradient(&pos, &nb, mid, refs.radius_n_m, refs.n0, |j| {
         Some(phi(&pos[j]) - phi(&pos[mid]))
     });
+    // Exact for a linear field on a full lattice; differences of field values of order 1
+    // divided by distances of order l0 leave round-off of order 1e-13.
     assert!((g - a).norm() < 1e-10, "gradient {g:?} vs {a:?}");
 
     // Laplacian of a quadratic |x|^2 (plus linear terms) is exactly 2D.
@@ -83,6 +90,8 @@ fn check_operators<const D: usize>() {
         refs.lambda_m2,
         |j| Some(nalgebra::SVector::<f64, 1>::new(q(&pos[j]) - q(&pos[mid]))),
     );
+    // Exact on a full lattice by the definition of lambda; differences of |x|^2 of order 0.5
+    // divided by lambda (about 1e-3 m^2) leave round-off of order 1e-13.
     assert!(
         (lap[0] - 2.0 * D as f64).abs() < 1e-9,
         "laplacian {} vs {}",
@@ -165,12 +174,17 @@ fn pcg_meets_its_residual_tolerance() {
         .sum::<f64>()
         .sqrt();
     let bn: f64 = b.iter().map(|v| v * v).sum::<f64>().sqrt();
+    // CG stops on its recursive residual; the true one drifts from it by round-off, far less
+    // than a factor 10 at this size.
     assert!(r / bn < 10.0 * tol, "true residual {}", r / bn);
     let err = x
         .iter()
         .zip(&x_true)
         .map(|(p, q)| (p - q).abs())
         .fold(0.0, f64::max);
+    // Error <= condition number (about 680 for this 5-point Poisson matrix) times the
+    // relative residual; MEASURED in the message.
+    eprintln!("max error {err:e}");
     assert!(err < 1e-6, "max error {err}");
     // An iteration cap below what the system needs is reported as not converged.
     x.iter_mut().for_each(|v| *v = 0.0);
@@ -260,6 +274,12 @@ fn multigrid_preconditioner_cuts_iterations_and_keeps_bits_across_threads() {
     let (mg2, x2, _) = solve(2, true);
     assert!(jacobi.converged && mg1.converged, "{jacobi:?} {mg1:?}");
     assert!(depth >= 4, "levels: {depth}");
+    // Jacobi-PCG needs O(size) iterations, multigrid about as many at any size: a factor 5
+    // leaves room (MEASURED below).
+    eprintln!(
+        "multigrid {} vs Jacobi {} iterations",
+        mg1.iterations, jacobi.iterations
+    );
     assert!(
         mg1.iterations * 5 < jacobi.iterations,
         "multigrid {} vs Jacobi {} iterations",
@@ -282,6 +302,7 @@ fn multigrid_preconditioner_cuts_iterations_and_keeps_bits_across_threads() {
         .sum::<f64>()
         .sqrt();
     let bn: f64 = b.iter().map(|v| v[0] * v[0]).sum::<f64>().sqrt();
+    // As above: the true residual against the recursive one.
     assert!(r / bn < 10.0 * tol, "true residual {}", r / bn);
 }
 

@@ -315,6 +315,9 @@ fn sphere_layers<const D: usize>() {
         4.0 * std::f64::consts::PI * (r - 0.5 * l0).powi(2) / (l0 * l0)
     };
     let ratio = walls as f64 / expected;
+    // Lattice points in a one-cell shell scatter around its volume (the Gauss circle
+    // problem's rim noise): a few per cent at a radius of several spacings. MEASURED below.
+    eprintln!("walls {walls} against {expected:.1} expected: ratio {ratio:.4}");
     assert!(
         (0.9..1.1).contains(&ratio),
         "{walls} walls, {expected} expected"

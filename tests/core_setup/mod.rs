@@ -71,6 +71,7 @@ pub fn config<const D: usize>(
 
 /// One step of the CFL time step towards `end_s`; false once `end_s` is reached.
 pub fn advance<const D: usize>(solver: &mut Solver<D>, end_s: f64) -> bool {
+    // The time is a sum of steps: round-off of order 1e-16 s below end_s.
     if end_s - solver.time_s <= 1e-12 {
         return false;
     }
