@@ -316,8 +316,8 @@ fn sphere_layers<const D: usize>() {
     };
     let ratio = walls as f64 / expected;
     // Lattice points in a one-cell shell scatter around its volume (the Gauss circle
-    // problem's rim noise): a few per cent at a radius of several spacings. MEASURED below.
-    eprintln!("walls {walls} against {expected:.1} expected: ratio {ratio:.4}");
+    // problem's rim noise): a few per cent at a radius of several spacings. MEASURED: 0.955
+    // (2D), 0.997 (3D).
     assert!(
         (0.9..1.1).contains(&ratio),
         "{walls} walls, {expected} expected"
