@@ -51,7 +51,9 @@ fn bingham_heap_matches_lubrication_closed_form() {
     let last = run.states.len() - 1;
     let heap = fluid_positions(last);
     let heap_length = front(&heap);
-    // At rest: the front moved less than 1 % of the heap length over the last 2 s.
+    // Near rest: the front moved less than 1 % of the heap length over the last 2 s (a tenth
+    // of the length tolerance below). The regularised model never stops: measured 8.6 mm
+    // (0.92 %) over 8-10 s at 20 mm, then 1-2 mm/s (the heap is 0.960 m, +2.9 %, at 30 s).
     let earlier = front(&fluid_positions(last - 1));
     assert!(
         (heap_length - earlier).abs() < 0.01 * length,
@@ -68,10 +70,23 @@ fn bingham_heap_matches_lubrication_closed_form() {
         metrics["closed_form_heap_length_m"]
     );
     let error = (heap_length - length) / length;
-    eprintln!("heap length {heap_length:.4} m, closed form {length:.4} m, error {error:+.3}");
-    assert!(error.abs() < 0.10, "heap length {heap_length} vs {length}");
-    // Profile: the top of the particles within a spacing of x = L - d, against h(d). The
-    // surface is resolved to half a spacing.
+    // Tolerance: the front is resolved to half a spacing (0.5 l0 / L = 1.1 % at 20 mm) plus
+    // the model error: at 10 s the finer runs are still spreading, 8.0 % short at 12.5 mm and
+    // 9.3 % short at 10 mm (6.8 % at 20 s). Measured at 20 mm: +0.1 % (crossing L at 9-10 s).
+    let tolerance = 0.5 * spacing_m / length + 0.093;
+    eprintln!(
+        "heap length {heap_length:.4} m, closed form {length:.4} m, error {error:+.3} \
+         (tolerance {tolerance:.3})"
+    );
+    assert!(
+        error.abs() < tolerance,
+        "heap length {heap_length} vs {length} (error {error:+.3} > {tolerance:.3})"
+    );
+    // Profile: the top of the particles within a spacing of x = L - d, against h(d).
+    // Tolerance: the surface is resolved to half a spacing, and a heap of the same area that
+    // is a fraction e shorter stands about e taller, so the length's relative tolerance
+    // carries over. Measured at 20 mm: +5.2 mm (+8.1 %, 0.26 l0) at d = L/4, -0.5 mm at L/2,
+    // -4.3 mm at 3L/4; at 12.5 mm (10 s, 8.0 % short) up to +13 mm (+15 %), inside it too.
     for share in [0.25, 0.5, 0.75] {
         let d = share * heap_length;
         let x = heap_length - d;
@@ -84,7 +99,7 @@ fn bingham_heap_matches_lubrication_closed_form() {
         let h = (2.0 * tau * d / (rho * g)).sqrt();
         eprintln!("d = {d:.3} m: height {top:.4} m, closed form {h:.4} m");
         assert!(
-            (top - h).abs() < 0.10 * h + 0.5 * spacing_m,
+            (top - h).abs() < tolerance * h + 0.5 * spacing_m,
             "profile at d = {d}: {top} vs {h}"
         );
     }
