@@ -157,13 +157,11 @@ fn blow_up_exits_3_and_says_so_in_the_file() {
 }
 
 /// The outside reader (Python `mcap` + `mcap-protobuf-support`) decodes every message of a real
-/// run. Needs the venv that `tools/test.sh` creates (or MPS_PYTHON); run with --include-ignored.
+/// run. Needs MPS_PYTHON, which tools/test.sh sets to the python of the venv it creates.
 #[test]
 #[ignore = "needs the Python venv; tools/test.sh runs it"]
 fn python_reader_decodes_a_real_run() {
-    let python = std::env::var("MPS_PYTHON")
-        .map(PathBuf::from)
-        .unwrap_or_else(|_| common::root().join(".venv/bin/python"));
+    let python = common::python();
     let dir = tempfile::tempdir().unwrap();
     let resolved = common::resolve("smoke_2d.yaml", &[]);
     let result = common::run_in(&resolved, dir.path(), 2);
