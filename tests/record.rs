@@ -1,5 +1,6 @@
 //! Recording: round trip, byte determinism, recovery of killed runs, point cloud packing.
 
+mod common;
 use std::collections::BTreeMap;
 use std::fs;
 use std::path::{Path, PathBuf};
@@ -531,15 +532,13 @@ fn point_cloud_rejects_a_short_field() {
 }
 
 /// Runs `tools/check_mcap.py` (Python `mcap` + `mcap-protobuf-support`) on a finished and a
-/// killed recording. Needs the venv: `python3 -m venv .venv && .venv/bin/pip install -r
-/// tools/requirements.txt` (or `MPS_PYTHON=/path/to/python`).
+/// killed recording. Needs MPS_PYTHON, a python with tools/requirements.txt: tools/test.sh sets
+/// it to its venv's.
 #[test]
-#[ignore = "needs the Python readers (tools/requirements.txt)"]
+#[ignore = "needs the Python readers (tools/requirements.txt); tools/test.sh runs it"]
 fn python_reader_accepts_our_files() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let python = std::env::var("MPS_PYTHON")
-        .map(PathBuf::from)
-        .unwrap_or_else(|_| root.join(".venv/bin/python"));
+    let python = common::python();
     let script = root.join("tools/check_mcap.py");
     let dir = tempfile::tempdir().unwrap();
     let (done, _) = finished_run(dir.path(), 0.0);
@@ -567,26 +566,24 @@ fn python_reader_accepts_our_files() {
     assert!(!ok, "{text}");
 }
 
-/// Helper for `aborted_process_keeps_its_checkpoints`: run in a child process, writes three
-/// checkpoints and more messages, then aborts (no destructor, no buffer flush: like SIGKILL).
-#[test]
-#[ignore = "helper, run as a child process by aborted_process_keeps_its_checkpoints"]
-fn child_records_then_aborts() {
-    let Ok(path) = std::env::var("MPS_RECORD_CHILD_PATH") else {
-        return;
-    };
-    let (mut rec, _) = record_run(Path::new(&path), 3, 0.0);
-    rec.write_diagnostics(99, &diagnostics(99)).unwrap();
-    std::process::abort();
-}
+/// Set in the child process of `aborted_process_keeps_its_checkpoints`: where it records.
+const CHILD_PATH: &str = "MPS_RECORD_CHILD_PATH";
 
+/// A process that dies mid-run keeps its checkpoints. The test runs itself again as a child
+/// process (with CHILD_PATH set) that writes three checkpoints and more messages, then aborts
+/// (no destructor, no buffer flush: like SIGKILL); the parent reads what is left.
 #[test]
 fn aborted_process_keeps_its_checkpoints() {
+    if let Some(path) = std::env::var_os(CHILD_PATH) {
+        let (mut rec, _) = record_run(Path::new(&path), 3, 0.0);
+        rec.write_diagnostics(99, &diagnostics(99)).unwrap();
+        std::process::abort();
+    }
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("aborted.mcap");
     let status = std::process::Command::new(std::env::current_exe().unwrap())
-        .args(["--ignored", "--exact", "child_records_then_aborts"])
-        .env("MPS_RECORD_CHILD_PATH", &path)
+        .args(["--exact", "aborted_process_keeps_its_checkpoints"])
+        .env(CHILD_PATH, &path)
         .stdout(std::process::Stdio::null())
         .stderr(std::process::Stdio::null())
         .status()

@@ -8,6 +8,20 @@ pub fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
 }
 
+/// The Python with the `mcap` readers (tools/requirements.txt) for the tests that drive them.
+/// Panics when MPS_PYTHON is unset: an ignored test run by `--include-ignored` must not pass
+/// without checking anything.
+pub fn python() -> PathBuf {
+    match std::env::var_os("MPS_PYTHON") {
+        Some(path) => PathBuf::from(path),
+        None => panic!(
+            "MPS_PYTHON is not set: this test drives the Python mcap reader. Run tools/test.sh \
+             (it creates .venv and sets MPS_PYTHON to .venv/bin/python), or set MPS_PYTHON to a \
+             python with tools/requirements.txt installed."
+        ),
+    }
+}
+
 pub fn experiment(name: &str) -> PathBuf {
     root().join("experiments").join(name)
 }
