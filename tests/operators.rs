@@ -53,6 +53,40 @@ fn n0_and_lambda_match_hand_sums_in_2d() {
     assert_eq!(weight(3.1 * l0, 3.1 * l0), 0.0, "w vanishes at re");
 }
 
+#[test]
+fn n0_and_lambda_match_hand_sums_in_3d() {
+    let l0 = 0.01;
+    let refs = RefValues::on_lattice::<3>(l0, 2.1 * l0, 3.1 * l0);
+    // re = 2.1: shells at 1 (x6), sqrt 2 (x12), sqrt 3 (x8) and 2 (x6) spacings.
+    let n0 = 6.0 * (2.1 - 1.0)
+        + 12.0 * (2.1 / 2f64.sqrt() - 1.0)
+        + 8.0 * (2.1 / 3f64.sqrt() - 1.0)
+        + 6.0 * (2.1 / 2.0 - 1.0);
+    // A 32-term sum of values below 1.1: round-off of order 1e-14.
+    assert!((refs.n0 - n0).abs() < 1e-12, "{} vs {}", refs.n0, n0);
+    // re = 3.1 adds sqrt 5 (x24), sqrt 6 (x24), sqrt 8 (x12) and 3 (x30: (3,0,0) and
+    // (2,2,1)); sqrt 10 = 3.16 lies outside.
+    let shells: [(f64, f64); 8] = [
+        (1.0, 6.0),
+        (2f64.sqrt(), 12.0),
+        (3f64.sqrt(), 8.0),
+        (2.0, 6.0),
+        (5f64.sqrt(), 24.0),
+        (6f64.sqrt(), 24.0),
+        (8f64.sqrt(), 12.0),
+        (3.0, 30.0),
+    ];
+    let (mut sw, mut swr2) = (0.0, 0.0);
+    for (r, m) in shells {
+        let w = 3.1 / r - 1.0;
+        sw += m * w;
+        swr2 += m * w * (r * l0) * (r * l0);
+    }
+    // 122-term sums: round-off of order 1e-13 on n0 (about 40) and 1e-19 m^2 on lambda.
+    assert!((refs.n0_lap - sw).abs() < 1e-12, "{} vs {sw}", refs.n0_lap);
+    assert!((refs.lambda_m2 - swr2 / sw).abs() < 1e-18);
+}
+
 fn check_operators<const D: usize>() {
     let l0 = 0.02;
     let (pos, mid) = lattice::<D>(9, l0);
