@@ -6,6 +6,9 @@
 pub use super::checker::{Checker, Issue, NON_NEGATIVE, POSITIVE, Range, between, fmt_num};
 use super::types::{Fluid, Manifest, SceneSection};
 
+/// Most outputs of each kind (checkpoints, clouds, diagnostics rows) a run may ask for.
+pub const MAX_OUTPUTS: f64 = 1e7;
+
 /// All issues of `m`, in field order.
 pub fn check<S: SceneSection>(m: &Manifest<S>) -> Vec<Issue> {
     let mut c = Checker::new();
@@ -214,17 +217,27 @@ pub fn check<S: SceneSection>(m: &Manifest<S>) -> Vec<Issue> {
 
     // output
     let o = &m.output;
-    c.real(
-        "output.checkpoint_interval_s",
-        o.checkpoint_interval_s,
-        POSITIVE,
-    );
-    c.real("output.cloud_interval_s", o.cloud_interval_s, POSITIVE);
-    c.real(
-        "output.diagnostics_interval_s",
-        o.diagnostics_interval_s,
-        POSITIVE,
-    );
+    // At most MAX_OUTPUTS of each stream: a smaller interval would only write the same
+    // step again and again (and 1e-300 s would never end).
+    for (field, interval) in [
+        ("output.checkpoint_interval_s", o.checkpoint_interval_s),
+        ("output.cloud_interval_s", o.cloud_interval_s),
+        ("output.diagnostics_interval_s", o.diagnostics_interval_s),
+    ] {
+        if c.real(field, interval, POSITIVE)
+            && m.time.end_s.is_finite()
+            && interval * MAX_OUTPUTS < m.time.end_s
+        {
+            c.fail(
+                field,
+                format!(
+                    "must be >= time.end_s / {MAX_OUTPUTS:e} = {} (at most {MAX_OUTPUTS:e} outputs of each kind), got {}",
+                    fmt_num(m.time.end_s / MAX_OUTPUTS),
+                    fmt_num(interval)
+                ),
+            );
+        }
+    }
 
     // stop
     c.int_at_least("stop.max_steps", m.stop.max_steps, 1);

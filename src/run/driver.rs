@@ -36,15 +36,20 @@ impl Schedule {
         }
         Self { interval_s, next }
     }
+    /// Whether an emission is due at `time_s`; then the next is the smallest k with
+    /// k interval > time_s. The search starts two below time_s / interval (every k below that
+    /// is passed anyway), so a step that spans many intervals costs no more than one.
     fn due(&mut self, time_s: f64) -> bool {
-        if time_s >= self.next as f64 * self.interval_s {
-            while time_s >= self.next as f64 * self.interval_s {
-                self.next += 1;
-            }
-            true
-        } else {
-            false
+        if time_s < self.next as f64 * self.interval_s {
+            return false;
         }
+        self.next = self
+            .next
+            .max(((time_s / self.interval_s) as u64).saturating_sub(2));
+        while time_s >= self.next as f64 * self.interval_s {
+            self.next += 1;
+        }
+        true
     }
 }
 

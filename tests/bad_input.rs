@@ -1,0 +1,159 @@
+//! Bad input at the command line: each gets one message naming the field (or flag) and what
+//! is allowed, exit code 2, and leaves no output file.
+mod common;
+use assert_cmd::Command;
+
+/// (extra arguments after `runner experiments/smoke_2d.yaml --out DIR`, message fragment).
+const CASES: &[(&[&str], &str)] = &[
+    (
+        &["--set", "output.diagnostics_interval_s=1e-300"],
+        "output.diagnostics_interval_s: must be >= time.end_s / 1e7",
+    ),
+    (
+        &["--set", "output.cloud_interval_s=1e-12"],
+        "output.cloud_interval_s: must be >= time.end_s / 1e7",
+    ),
+    (
+        &["--set", "output.checkpoint_interval_s=0"],
+        "output.checkpoint_interval_s: must be > 0",
+    ),
+    (&["--set", "spacing_m=-1"], "spacing_m: must be > 0"),
+    (&["--set", "spacing_m=.nan"], "spacing_m"),
+    (&["--set", "dimension=4"], "dimension: must be 2 or 3"),
+    (&["--set", "time.end_s=0"], "time.end_s: must be > 0"),
+    (
+        &["--set", "time.courant=2"],
+        "time.courant: must be in (0, 1]",
+    ),
+    (&["--set", "time.end_s=abc"], "time.end_s"),
+    (
+        &["--set", "gravity_m_s2=-9.81"],
+        "gravity_m_s2: must be >= 0",
+    ),
+    (
+        &["--set", "fluid.density_kg_m3=-5"],
+        "fluid.density_kg_m3: must be > 0",
+    ),
+    (
+        &["--set", "fluid.viscosity_pa_s=-1"],
+        "fluid.viscosity_pa_s: must be >= 0",
+    ),
+    (&["--set", "fluid.model=honey"], "honey"),
+    (
+        &["--set", "mps.laplacian_radius=0.5"],
+        "mps.laplacian_radius",
+    ),
+    (
+        &["--set", "mps.surface_threshold=1.5"],
+        "mps.surface_threshold",
+    ),
+    (
+        &["--set", "mps.wall_layers=0"],
+        "mps.wall_layers: must be >= 1",
+    ),
+    (
+        &["--set", "mps.collision_distance=1"],
+        "mps.collision_distance",
+    ),
+    (
+        &["--set", "mps.wall_collision_distance=2"],
+        "mps.wall_collision_distance",
+    ),
+    (&["--set", "mps.ppe_tolerance=1"], "mps.ppe_tolerance"),
+    (&["--set", "mps.ppe_preconditioner=magic"], "magic"),
+    (
+        &["--set", "stop.max_steps=0"],
+        "stop.max_steps: must be >= 1",
+    ),
+    (
+        &["--set", "stop.rest_metric=nope"],
+        "stop.rest_metric: `nope` is not a metric",
+    ),
+    (
+        &["--set", "stop.non_flowing_fraction=0.9"],
+        "needs a yield-stress fluid",
+    ),
+    (&["--set", "scene.kind=lb_box"], "lb_box"),
+    (
+        &["--set", "scene.tank_width_m=0.01"],
+        "scene.tank_width_m: must be >= 2 * spacing_m",
+    ),
+    (
+        &["--set", "scene.column_width_m=5"],
+        "scene.column_width_m: must be <= scene.tank_width_m",
+    ),
+    (&["--set", "name=a/b"], "name: may contain only"),
+    (&["--set", "nope.key=1"], "unknown key `nope`"),
+    (
+        &["--set", "boundaries.inlets.0.volume_m3=1"],
+        "is a list of 0 items",
+    ),
+    (&["--set", "spacing_m"], "KEY=VALUE"),
+    (&["--threads", "0"], "must be at least 1"),
+    (&["--threads", "x"], "expected a whole number of threads"),
+];
+
+#[test]
+fn each_bad_input_is_refused_naming_the_field_with_exit_2_and_no_file() {
+    assert!(CASES.len() >= 30);
+    let mut failures = Vec::new();
+    for (args, fragment) in CASES {
+        let out = tempfile::tempdir().unwrap();
+        let result = Command::cargo_bin("runner")
+            .unwrap()
+            .arg(common::experiment("smoke_2d.yaml"))
+            .arg("--out")
+            .arg(out.path())
+            .args(*args)
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&result.stderr);
+        let files = std::fs::read_dir(out.path()).unwrap().count();
+        if result.status.code() != Some(2) || !stderr.contains(fragment) || files != 0 {
+            failures.push(format!(
+                "{args:?}: exit {:?}, {files} files, stderr: {stderr}",
+                result.status.code()
+            ));
+        }
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
+
+#[test]
+fn too_many_threads_are_capped_with_a_warning_and_the_same_bits() {
+    let out = tempfile::tempdir().unwrap();
+    let run = |threads: &str| {
+        Command::cargo_bin("runner")
+            .unwrap()
+            .arg(common::experiment("smoke_2d.yaml"))
+            .args([
+                "--set",
+                "time.end_s=0.02",
+                "--quiet",
+                "--threads",
+                threads,
+                "--out",
+            ])
+            .arg(out.path())
+            .output()
+            .unwrap()
+    };
+    let capped = run("100000");
+    assert_eq!(capped.status.code(), Some(0));
+    assert!(
+        String::from_utf8_lossy(&capped.stderr).contains("warning: --threads 100000 capped at")
+    );
+    let path = String::from_utf8(capped.stdout).unwrap().trim().to_string();
+    let hashes = |p: &str| {
+        mps_runner::record::read_run(std::path::Path::new(p))
+            .unwrap()
+            .summary
+            .unwrap()
+            .checkpoints
+    };
+    let capped_hashes = hashes(&path);
+    std::fs::remove_file(&path).unwrap();
+    let one = run("1");
+    let path = String::from_utf8(one.stdout).unwrap().trim().to_string();
+    assert_eq!(hashes(&path), capped_hashes);
+}
