@@ -75,8 +75,8 @@ const CASES: &[(&[&str], &str)] = &[
     ),
     (&["--set", "scene.kind=lb_box"], "lb_box"),
     (
-        &["--set", "scene.tank_width_m=0.01"],
-        "scene.tank_width_m: must be >= 2 * spacing_m",
+        &["--set", "scene.column_height_m=0.04"],
+        "scene.column_height_m: must be >= 2 * spacing_m",
     ),
     (
         &["--set", "scene.column_width_m=5"],
