@@ -20,6 +20,8 @@ pub struct SweepOptions {
     pub workers: Option<usize>,
     /// Passed to every run (set from a signal handler to interrupt them all).
     pub interrupt: Option<std::sync::Arc<std::sync::atomic::AtomicBool>>,
+    /// Passed to every run (see [`RunOptions::max_particles`]).
+    pub max_particles: Option<u64>,
 }
 
 /// How one point ended.
@@ -58,6 +60,7 @@ pub fn run_sweep(
         threads: Some(1),
         progress: false,
         interrupt: options.interrupt.clone(),
+        max_particles: options.max_particles,
     };
     std::thread::scope(|s| {
         for _ in 0..workers {

@@ -198,6 +198,7 @@ fn an_interrupted_library_run_resumes_to_the_same_hashes() {
             threads: Some(2),
             progress: false,
             interrupt: Some(Arc::new(AtomicBool::new(true))),
+            max_particles: None,
         },
     )
     .unwrap();

@@ -322,6 +322,7 @@ fn run_sweep_library_and_failed_points() {
         out_dir: dir.path().join("lib"),
         workers: Some(1),
         interrupt: None,
+        max_particles: None,
     };
     let (folder, outcomes) = run_sweep(&s, &options, &|_| {});
     assert_eq!(outcomes.iter().map(|o| o.index).collect::<Vec<_>>(), [0, 1]);

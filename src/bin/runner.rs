@@ -18,6 +18,8 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 const EXIT_INTERNAL: u8 = 1;
+/// `--max-particles` default: about 7.5 GB in 2D, 20 GB in 3D (see `run::run`).
+const DEFAULT_MAX_PARTICLES: u64 = 5_000_000;
 /// `runner verify`: the replay differs from the file (or the trend does not hold).
 const EXIT_MISMATCH: u8 = 1;
 const EXIT_BAD_INPUT: u8 = 2;
@@ -52,6 +54,10 @@ struct RunArgs {
     /// Worker threads (default: all cores). Results are bitwise identical for any count.
     #[arg(long, value_parser = threads_arg)]
     threads: Option<usize>,
+    /// Refuse a run whose scene is estimated to hold more particles than this (checked
+    /// before anything is allocated or written).
+    #[arg(long, value_name = "N", default_value_t = DEFAULT_MAX_PARTICLES)]
+    max_particles: u64,
     /// No progress lines on stderr.
     #[arg(long, short)]
     quiet: bool,
@@ -458,12 +464,13 @@ fn bench_command(
         threads,
         progress: false,
         interrupt: interrupt_flag(),
+        max_particles: Some(DEFAULT_MAX_PARTICLES),
     };
     let result = match run(&resolved, &options) {
         Ok(r) => r,
         Err(e) => {
             eprintln!("error: {e}");
-            return ExitCode::from(EXIT_INTERNAL);
+            return ExitCode::from(run_error_code(&e));
         }
     };
     let metric = |k: &str| result.summary.metrics.get(k).copied().unwrap_or(f64::NAN);
@@ -562,6 +569,7 @@ fn run_command(args: RunArgs) -> ExitCode {
         threads: args.threads,
         progress: !args.quiet,
         interrupt: interrupt_flag(),
+        max_particles: Some(args.max_particles),
     };
     if !args.quiet {
         eprintln!(
@@ -599,8 +607,17 @@ fn run_command(args: RunArgs) -> ExitCode {
         }
         Err(e) => {
             eprintln!("error: {e}");
-            ExitCode::from(EXIT_INTERNAL)
+            ExitCode::from(run_error_code(&e))
         }
+    }
+}
+
+/// Exit code of a run that could not be made: 2 for a run refused as too large (bad
+/// input), 1 for a recording that failed.
+fn run_error_code(e: &mps_runner::run::RunError) -> u8 {
+    match e {
+        mps_runner::run::RunError::TooLarge { .. } => EXIT_BAD_INPUT,
+        _ => EXIT_INTERNAL,
     }
 }
 
@@ -626,6 +643,7 @@ fn sweep_command(s: &experiment::Sweep, args: &RunArgs) -> ExitCode {
         out_dir: args.out.clone(),
         workers: args.threads,
         interrupt: interrupt_flag(),
+        max_particles: Some(args.max_particles),
     };
     let on_done = |o: &mps_runner::sweep_run::PointOutcome| match &o.result {
         Ok(r) => {

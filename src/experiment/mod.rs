@@ -12,7 +12,7 @@ pub mod geometry;
 
 use crate::manifest::validate::Checker;
 use crate::manifest::{self, Fluid, SceneSection};
-use crate::mps::{Inlet, ParticleKind, Particles, RigidBody, Vector};
+use crate::mps::{self, Inlet, ParticleKind, Particles, RigidBody, Vector};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -177,6 +177,58 @@ pub fn build_scene<const D: usize>(m: &Manifest) -> Scene<D> {
     let mut scene = with_experiment!(&m.scene, e => e.build::<D>(m));
     boundaries::apply(m, &mut scene);
     scene
+}
+
+/// About how many particles the run of `m` will hold (its scene plus what its inlets pour),
+/// without building it at its spacing: the scene is built at spacings f l0 and 2 f l0, f the
+/// smallest power of sqrt 2 whose scene holds at most 20 000 particles, and the two counts
+/// fitted as a volume and a surface term, n = X (f l0 / h)^D + Y (f l0 / h)^(D-1) (fluid
+/// fills volumes, walls are layers on surfaces), then taken at h = l0. A scene of up to
+/// 20 000 particles is counted exactly. The cost is that of two scenes of that size.
+pub fn estimate_particles(m: &Manifest) -> f64 {
+    let d = m.dimension as usize;
+    let count = |factor: f64| -> f64 {
+        let mut coarse = m.clone();
+        coarse.spacing_m = m.spacing_m * factor;
+        // Inlets pour later; a coarse build needs none of them.
+        coarse.boundaries.inlets.clear();
+        match m.dimension {
+            3 => build_scene::<3>(&coarse).particles.len() as f64,
+            _ => build_scene::<2>(&coarse).particles.len() as f64,
+        }
+    };
+    let factor = |j: u32| f64::from(1u32 << (j / 2)) * if j % 2 == 1 { 2f64.sqrt() } else { 1.0 };
+    // Start so coarse that any scene is a handful of cells, then refine.
+    let mut j = 40;
+    let (mut n, mut coarser) = (count(factor(j)), 0.0);
+    while j > 0 && n < 20_000.0 {
+        j -= 1;
+        if j + 2 <= 40 {
+            coarser = count(factor(j + 2));
+        }
+        n = count(factor(j));
+    }
+    let scene = if j == 0 {
+        n
+    } else {
+        // n = X + Y at f, coarser = X / 2^D + Y / 2^(D-1) at 2 f.
+        let half = cell_volume_of(2.0, d - 1);
+        let x = (2.0 * (n - half * coarser)).max(0.0);
+        let y = (n - x).max(0.0);
+        let f = factor(j);
+        x * cell_volume_of(f, d) + y * cell_volume_of(f, d - 1)
+    };
+    let poured: f64 = m
+        .boundaries
+        .inlets
+        .iter()
+        .map(|i| i.volume_m3 / mps::particles::cell_volume(m.spacing_m, m.dimension as usize))
+        .sum();
+    scene + poured
+}
+
+fn cell_volume_of(length: f64, dimension: usize) -> f64 {
+    mps::particles::cell_volume(length, dimension)
 }
 
 /// Metrics of the experiment at the current state (documented in the README): the front

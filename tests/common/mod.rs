@@ -39,6 +39,7 @@ pub fn run_in(resolved: &Resolved, out_dir: &Path, threads: usize) -> RunResult 
             threads: Some(threads),
             progress: false,
             interrupt: None,
+            max_particles: None,
         },
     )
     .expect("run")
