@@ -1,7 +1,8 @@
-//! Golden checksums: the final checkpoint hash of four small runs, pinned before the test
-//! modules were moved (issue "One module per workability test"). A refactor must keep them;
-//! a value is re-minted only when a change is meant to alter the simulation, and the commit
-//! that does so says why. Each case runs on 1 and on 2 threads (DESIGN.md section 6).
+//! Golden checksums: the final checkpoint hash of a small run per test kind (the first four
+//! pinned before the test modules were moved, issue "One module per workability test"). A
+//! refactor must keep them; a value is re-minted only when a change is meant to alter the
+//! simulation, and the commit that does so says why. Each case runs on 1, 2, 3 and 8 threads
+//! (DESIGN.md section 6: the split of the work never depends on the pool size).
 mod common;
 
 /// (experiment file, overrides, final checkpoint SHA-256).
@@ -34,6 +35,18 @@ const CASES: &[(&str, &[&str], &str)] = &[
         ],
         "daa36bfa0be0ffdd2a13fb8e360f55013264c3f6bed557d7ae898b13676d6ba6",
     ),
+    // Added after the move (one small run per test kind): the column collapse at 20 mm and
+    // the boundary pieces (inlet, obstacle, rod, tags) of pour_2d, 0.3 s.
+    (
+        "column_collapse_2d.yaml",
+        &["spacing_m=0.02", "time.end_s=0.3"],
+        "02897624e6b7923872f8b896a49f2aa9ff3b49fbd2ff46039820bc63a4b9c112",
+    ),
+    (
+        "pour_2d.yaml",
+        &["time.end_s=0.3"],
+        "004caff60a089d3384395443fe23429b5e9cd41da4a1f87e5723dd4a2e39fad8",
+    ),
 ];
 
 fn final_hash(experiment: &str, sets: &[&str], threads: usize) -> String {
@@ -50,10 +63,10 @@ fn final_hash(experiment: &str, sets: &[&str], threads: usize) -> String {
 }
 
 #[test]
-fn golden_final_checkpoint_hashes_on_one_and_two_threads() {
+fn golden_final_checkpoint_hashes_on_1_2_3_and_8_threads() {
     let mut wrong = Vec::new();
     for (experiment, sets, golden) in CASES {
-        for threads in [1, 2] {
+        for threads in [1, 2, 3, 8] {
             let got = final_hash(experiment, sets, threads);
             if got != *golden {
                 wrong.push(format!(
