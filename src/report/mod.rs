@@ -104,7 +104,8 @@ pub fn run_title(run: &RunFile) -> String {
         .map_or("run", |s| s.as_str());
     let hash = meta
         .and_then(|m| m.get("experiment_sha256"))
-        .map_or("", |s| &s[..s.len().min(12)]);
+        // Read from the file: a damaged value may be short or cut a character in two.
+        .map_or("", |s| s.get(..12).unwrap_or(s));
     format!("{name} {hash}")
 }
 
