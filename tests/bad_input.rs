@@ -200,3 +200,41 @@ fn the_size_estimate_is_close_to_the_scene_it_replaces() {
         );
     }
 }
+
+#[test]
+fn a_finished_run_cut_short_is_called_incomplete_not_verified() {
+    let dir = tempfile::tempdir().unwrap();
+    let resolved = common::resolve("smoke_2d.yaml", &["time.end_s=0.02"]);
+    let path = common::run_completed(&resolved, dir.path(), 1).path;
+    let cut = dir.path().join("cut.mcap");
+    let mut bytes = std::fs::read(&path).unwrap();
+    bytes.pop();
+    std::fs::write(&cut, &bytes).unwrap();
+    let runner = |args: &[&str]| {
+        let out = Command::cargo_bin("runner")
+            .unwrap()
+            .args(args)
+            .output()
+            .unwrap();
+        (
+            out.status.code(),
+            String::from_utf8_lossy(&out.stderr).to_string(),
+        )
+    };
+    let cut_s = cut.to_str().unwrap();
+    let svg = dir.path().join("x.svg");
+    for args in [
+        vec!["verify", cut_s, "--quiet"],
+        vec!["plot", cut_s, "--out", svg.to_str().unwrap()],
+        vec!["snapshot", cut_s, "--out", svg.to_str().unwrap()],
+        vec!["resume", cut_s],
+    ] {
+        let (code, stderr) = runner(&args);
+        assert_eq!(code, Some(2), "{args:?}: {stderr}");
+        assert!(stderr.contains("is incomplete"), "{args:?}: {stderr}");
+    }
+    assert!(!svg.exists(), "nothing drawn from half a file");
+    // The file whole still verifies.
+    let (code, stderr) = runner(&["verify", path.to_str().unwrap(), "--quiet"]);
+    assert_eq!(code, Some(0), "{stderr}");
+}

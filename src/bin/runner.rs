@@ -249,6 +249,9 @@ fn main() -> ExitCode {
             quiet,
         }) => resume_command(&file, threads, quiet),
         Some(Command::Plot { run, metric, out }) => {
+            if let Err(code) = readable_run(&run) {
+                return code;
+            }
             report_result(report::plot_run(&run, metric.as_deref(), out.as_deref()))
         }
         Some(Command::PlotSweep {
@@ -270,13 +273,21 @@ fn main() -> ExitCode {
             field,
             top,
             out,
-        }) => report_result(report::snapshot(
-            &run,
-            field.as_deref(),
-            top,
-            out.as_deref(),
-        )),
+        }) => {
+            if let Err(code) = readable_run(&run) {
+                return code;
+            }
+            report_result(report::snapshot(
+                &run,
+                field.as_deref(),
+                top,
+                out.as_deref(),
+            ))
+        }
         Some(Command::Profile { run, out }) => {
+            if let Err(code) = readable_run(&run) {
+                return code;
+            }
             report_result(report::profile(&run, out.as_deref()).map(|(path, table)| {
                 print!("{table}");
                 path
@@ -284,6 +295,44 @@ fn main() -> ExitCode {
         }
         None => run_command(cli.run),
     }
+}
+
+/// Why a file named as a finished run (not `.partial`) is not one: it lacks the closing
+/// magic bytes of an MCAP file, so it was cut short or damaged after it was written. Reading
+/// the last 8 bytes is enough to tell; a `.partial` file (a run in progress or killed) is
+/// expected to lack them.
+fn damaged_run(path: &std::path::Path) -> Option<String> {
+    use std::io::{Read, Seek, SeekFrom};
+    if path.to_string_lossy().ends_with(".partial") {
+        return None;
+    }
+    let mut end = [0u8; 8];
+    let intact = std::fs::File::open(path)
+        .is_ok_and(|mut f| f.seek(SeekFrom::End(-8)).is_ok() && f.read_exact(&mut end).is_ok())
+        && &end == b"\x89MCAP0\r\n";
+    (!intact && path.exists()).then(|| {
+        format!(
+            "{} is incomplete: it does not end with the MCAP footer and magic that a finished run writes (cut short or damaged after it was written; a run in progress or killed is named .partial)",
+            path.display()
+        )
+    })
+}
+
+/// For the commands that present a file's contents (plot, snapshot, profile): a damaged
+/// finished file is refused (exit 2) rather than drawn from half of it; a `.partial` file is
+/// drawn with a warning.
+fn readable_run(path: &std::path::Path) -> Result<(), ExitCode> {
+    if let Some(why) = damaged_run(path) {
+        eprintln!("error: {why}");
+        return Err(ExitCode::from(EXIT_BAD_INPUT));
+    }
+    if path.to_string_lossy().ends_with(".partial") {
+        eprintln!(
+            "warning: {} is an unfinished run (in progress or killed): this shows what it holds so far",
+            path.display()
+        );
+    }
+    Ok(())
 }
 
 /// SIGINT and SIGTERM set the returned flag: the run stops at the next step and finishes its
@@ -359,7 +408,11 @@ fn verify_command(args: VerifyArgs) -> ExitCode {
                     println!("{} {} {:e} {}", h.index, h.step, h.time_s, h.state_sha256);
                 }
             }
-            if report.passed() {
+            if let Some(why) = damaged_run(&file) {
+                // The checkpoints it still holds were replayed, but it is not the whole run.
+                eprintln!("error: {why}");
+                ExitCode::from(EXIT_BAD_INPUT)
+            } else if report.passed() {
                 ExitCode::SUCCESS
             } else {
                 ExitCode::from(EXIT_MISMATCH)
@@ -373,6 +426,12 @@ fn verify_command(args: VerifyArgs) -> ExitCode {
 }
 
 fn resume_command(file: &std::path::Path, threads: Option<usize>, quiet: bool) -> ExitCode {
+    if let Some(why) = damaged_run(file) {
+        eprintln!(
+            "error: cannot resume: {why}; a killed run's .partial file resumes, a damaged finished one does not"
+        );
+        return ExitCode::from(EXIT_BAD_INPUT);
+    }
     if threads == Some(0) {
         eprintln!("error: --threads must be at least 1");
         return ExitCode::from(EXIT_BAD_INPUT);
