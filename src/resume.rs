@@ -235,12 +235,5 @@ fn resume_in<const D: usize>(job: Job) -> Result<RunResult, ResumeError> {
     if let Some(aside) = source_aside {
         let _ = std::fs::remove_file(aside);
     }
-    Ok(RunResult {
-        path,
-        outcome: end.outcome,
-        summary: end.summary,
-        stop_reason: end.stop_reason,
-        wall_time_s: started.elapsed().as_secs_f64(),
-        timing: solver.timing,
-    })
+    Ok(RunResult::new(path, end, started, solver.timing))
 }

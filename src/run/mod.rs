@@ -50,6 +50,25 @@ pub struct RunResult {
     pub timing: StageTimes,
 }
 
+impl RunResult {
+    /// The result of a time loop that ended as `end`, its file finished at `path`.
+    pub fn new(
+        path: PathBuf,
+        end: LoopEnd,
+        started: std::time::Instant,
+        timing: StageTimes,
+    ) -> Self {
+        RunResult {
+            path,
+            outcome: end.outcome,
+            summary: end.summary,
+            stop_reason: end.stop_reason,
+            wall_time_s: started.elapsed().as_secs_f64(),
+            timing,
+        }
+    }
+}
+
 #[derive(Debug, thiserror::Error)]
 pub enum RunError {
     #[error("cannot create output directory {path}: {source}")]
@@ -162,12 +181,5 @@ fn run_in<const D: usize>(
         &mut recorder,
     )?;
     let path = recorder.finish(time_ns(solver.time_s), &end.summary, &end.outcome)?;
-    Ok(RunResult {
-        path,
-        outcome: end.outcome,
-        summary: end.summary,
-        stop_reason: end.stop_reason,
-        wall_time_s: started.elapsed().as_secs_f64(),
-        timing: solver.timing,
-    })
+    Ok(RunResult::new(path, end, started, solver.timing))
 }
