@@ -445,6 +445,9 @@ pub fn surface_height_m<const D: usize>(
 
 /// Roussel & Coussot (2005), thin "pancake" regime: final radius of a yield-stress fluid of
 /// volume V spread on a plane, R = (225 rho g V^2 / (128 pi^2 tau_0))^(1/5).
+/// Known exception to the no-std-`powf` rule (issue 14): this summary metric was recorded
+/// with std `powf` by every slump file so far, and libm's `pow` differs in the last bit for
+/// about 10 % of inputs, so switching would make those files fail `runner verify`.
 pub fn closed_form_radius_m(
     density_kg_m3: f64,
     gravity_m_s2: f64,
