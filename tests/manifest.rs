@@ -938,3 +938,15 @@ fn experiment_hashes_stay_what_they_were() {
         r.canonical
     );
 }
+
+#[test]
+fn a_list_where_a_number_belongs_is_named_as_such() {
+    let text = "name: x\ndimension: 2\nspacing_m: [1, 2]\ntime: {end_s: 1}\nfluid: {model: newtonian, density_kg_m3: 1000, viscosity_pa_s: 0.001}\nscene: {kind: dam_break}\n";
+    let e = experiment::from_str(text, "exp.yaml", &[])
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("exp.yaml:3:12: spacing_m: expected a single value (a number, string or bool), got a list or a mapping"),
+        "{e}"
+    );
+}

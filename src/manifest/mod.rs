@@ -365,7 +365,20 @@ fn describe<S: SceneSection>(e: &serde_saphyr::Error, map: &SourceMap) -> Descri
             };
             (at, message)
         }
-        _ => (at, saphyr_message(e)),
+        _ => {
+            let mut message = saphyr_message(e);
+            // serde-saphyr's words for a list or mapping where one value belongs.
+            let not_scalar = at
+                .as_deref()
+                .and_then(|p| map.entries.get(p))
+                .is_some_and(|entry| entry.scalar.is_none());
+            if message.contains("expected string scalar") && not_scalar {
+                message =
+                    "expected a single value (a number, string or bool), got a list or a mapping"
+                        .to_string();
+            }
+            (at, message)
+        }
     };
     Described {
         field,
