@@ -66,7 +66,16 @@ pub fn resume(path: &Path, options: &ResumeOptions) -> Result<Resumed, ResumeErr
                     "the run failed; resuming would repeat the failure".into(),
                 ));
             }
-            other => return Err(unusable(format!("unexpected outcome {other:?}"))),
+            Some(other) => {
+                return Err(unusable(format!(
+                    "its summary records the outcome {other:?}; only an interrupted run (or a killed one's .partial file) can be resumed"
+                )));
+            }
+            None => {
+                return Err(unusable(
+                    "the file is finished but has no /summary message, so its outcome is unknown (damaged?); only an interrupted run (or a killed one's .partial file) can be resumed".into(),
+                ));
+            }
         }
     }
     let resolved = manifest_of(&run).map_err(|e| unusable(e.to_string()))?;
