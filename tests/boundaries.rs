@@ -5,7 +5,6 @@ mod common;
 use mps_runner::experiment::build_scene;
 use mps_runner::mps::ParticleKind;
 use mps_runner::record::read_run;
-use mps_runner::verify::{VerifyOptions, verify};
 
 /// 120 particles (0.012 m^2 at l0 = 10 mm) in layers of 6 at 1 m/s: the pour lasts 0.2 s,
 /// so the checkpoint at 0.1 s is taken mid-pour.
@@ -138,18 +137,8 @@ fn a_mid_pour_checkpoint_replays_bit_for_bit_and_threads_agree() {
         "the inlet's progress is recorded"
     );
     assert!(mid.extra_scalars[0] > 0.0 && mid.extra_scalars[0] < 120.0);
-    let report = verify(
-        &two.path,
-        &VerifyOptions {
-            from: Some(2),
-            threads: Some(1),
-            ..VerifyOptions::default()
-        },
-    )
-    .unwrap();
-    assert!(report.passed(), "{report}");
-    let report = verify(&two.path, &VerifyOptions::default()).unwrap();
-    assert!(report.passed(), "{report}");
+    common::assert_replays(&two.path, Some(2));
+    common::assert_replays(&two.path, None);
 }
 
 #[test]

@@ -5,7 +5,6 @@ use mps_runner::experiment::build_scene;
 use mps_runner::experiment::slump;
 use mps_runner::mps::ParticleKind;
 use mps_runner::record::{Outcome, read_run};
-use mps_runner::verify::{VerifyOptions, verify};
 
 const FRUSTUM_L: f64 = 5.497_787_143_782_138; // pi 0.3 (0.1^2 + 0.1 0.05 + 0.05^2) / 3, in L
 
@@ -150,16 +149,7 @@ fn cone_lifts_at_its_speed_and_holds_the_fluid_before() {
             }
         }
     }
-    let report = verify(
-        &result.path,
-        &VerifyOptions {
-            from: Some(2),
-            threads: Some(1),
-            ..VerifyOptions::default()
-        },
-    )
-    .unwrap();
-    assert!(report.passed(), "{report}");
+    common::assert_replays(&result.path, Some(2));
 }
 
 #[test]

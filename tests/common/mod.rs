@@ -57,3 +57,18 @@ pub fn run_completed(resolved: &Resolved, out_dir: &Path, threads: usize) -> Run
     );
     result
 }
+
+/// Replays `path` from logged checkpoint `from` (None: from the start) on one thread and
+/// asserts that every later checkpoint is identical bit for bit.
+pub fn assert_replays(path: &Path, from: Option<u32>) {
+    let report = mps_runner::verify::verify(
+        path,
+        &mps_runner::verify::VerifyOptions {
+            from,
+            threads: Some(1),
+            ..mps_runner::verify::VerifyOptions::default()
+        },
+    )
+    .unwrap();
+    assert!(report.passed(), "{report}");
+}
