@@ -8,7 +8,9 @@
 use crate::checkpoint;
 use crate::experiment::Resolved;
 use crate::proto::mps::v1::{CheckpointHash, StateCheckpoint};
-use crate::record::{Recorder, partial_path, read_run};
+use crate::record::{
+    Existing, PARTIAL_SUFFIX, Recorder, lock_unfinished, partial_path, read_run,
+};
 use crate::restore::{Logged, is_scheduled, manifest_of, read_messages, restore_solver};
 use crate::run::{LoopControl, LoopStart, RunError, RunResult, output_path, time_loop, time_ns};
 use std::path::{Path, PathBuf};
@@ -55,6 +57,13 @@ pub fn resume(path: &Path, options: &ResumeOptions) -> Result<Resumed, ResumeErr
     let unusable = |reason: String| ResumeError::Unusable {
         path: path.to_path_buf(),
         reason,
+    };
+    // A `.partial` may still be written by a live runner: refuse rather than take it over.
+    // The lock is held until the resumed file is finished (it follows the file aside).
+    let _source_lock = if path.to_string_lossy().ends_with(PARTIAL_SUFFIX) {
+        Some(lock_unfinished(path).map_err(RunError::from)?)
+    } else {
+        None
     };
     let run = read_run(path).map_err(|e| unusable(e.to_string()))?;
     if run.complete {
@@ -186,8 +195,19 @@ fn resume_in<const D: usize>(job: Job) -> Result<RunResult, ResumeError> {
         None
     };
     let started = std::time::Instant::now();
-    let mut recorder = Recorder::create(&final_path, &crate::run::run_header(resolved, threads))
-        .map_err(RunError::from)?;
+    // Resuming an interrupted finished file replaces it (atomically, once the new file is
+    // finished); any other file of the same name is refused.
+    let existing = if path == final_path {
+        Existing::Replace
+    } else {
+        Existing::Refuse
+    };
+    let mut recorder = Recorder::create_with(
+        &final_path,
+        &crate::run::run_header(resolved, threads),
+        existing,
+    )
+    .map_err(RunError::from)?;
     let (index, step, time) = (
         from.index.to_string(),
         from.step.to_string(),

@@ -22,6 +22,8 @@ pub struct SweepOptions {
     pub interrupt: Option<std::sync::Arc<std::sync::atomic::AtomicBool>>,
     /// Passed to every run (see [`RunOptions::max_particles`]).
     pub max_particles: Option<u64>,
+    /// Passed to every run (see [`RunOptions::overwrite`]).
+    pub overwrite: bool,
 }
 
 /// How one point ended.
@@ -61,6 +63,7 @@ pub fn run_sweep(
         progress: false,
         interrupt: options.interrupt.clone(),
         max_particles: options.max_particles,
+        overwrite: options.overwrite,
     };
     std::thread::scope(|s| {
         for _ in 0..workers {

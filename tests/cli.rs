@@ -128,34 +128,6 @@ fn unknown_override_and_bad_cli_exit_2() {
     runner().arg("missing.yaml").assert().code(2);
 }
 
-#[test]
-fn blow_up_exits_3_and_says_so_in_the_file() {
-    let dir = tempfile::tempdir().unwrap();
-    let exp = common::experiment("smoke_2d.yaml");
-    // A speed limit the falling column exceeds within a few steps stands in for a blow-up.
-    let assert = runner()
-        .arg(&exp)
-        .arg("--out")
-        .arg(dir.path())
-        .args(["--set", "stop.max_speed_m_s=0.05"])
-        .assert()
-        .code(3);
-    let stdout = String::from_utf8(assert.get_output().stdout.clone()).unwrap();
-    let run = read_run(&PathBuf::from(stdout.lines().last().unwrap())).unwrap();
-    let summary = run.summary.unwrap();
-    assert_eq!(summary.outcome, "failed");
-    assert!(
-        summary.reason.contains("max_speed_m_s"),
-        "{}",
-        summary.reason
-    );
-    assert_eq!(run.metadata["outcome"]["status"], "failed");
-    assert!(
-        !run.states.is_empty(),
-        "checkpoints written before the failure are kept"
-    );
-}
-
 /// The outside reader (Python `mcap` + `mcap-protobuf-support`) decodes every message of a real
 /// run. Needs MPS_PYTHON, which tools/test.sh sets to the python of the venv it creates.
 #[test]
@@ -198,7 +170,7 @@ fn bench_reports_what_its_run_recorded() {
         .arg("--out")
         .arg(dir.path())
         .args(["--threads", "2", "--set", "time.end_s=0.05"])
-        .args(["--set", "output.diagnostics_interval_s=1e-5"])
+        .args(["--set", "output.diagnostics_interval_s=5e-5"])
         .assert()
         .success();
     let stdout = String::from_utf8(assert.get_output().stdout.clone()).unwrap();

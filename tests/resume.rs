@@ -1,7 +1,8 @@
 //! Interrupts and resume, end to end with the real binary: SIGINT (and SIGTERM) finish the
 //! file as interrupted, SIGKILL leaves a `.partial` file; `runner resume` on either gives the
 //! same checkpoint hashes (and as many diagnostics rows and clouds) as a run that was never
-//! interrupted.
+//! interrupted. A run file being written, finished or left by a killed run is never overwritten
+//! by another runner unless asked (`--overwrite`).
 mod common;
 use assert_cmd::cargo::CommandCargoExt;
 use mps_runner::record::{RunFile, read_run};
@@ -199,6 +200,7 @@ fn an_interrupted_library_run_resumes_to_the_same_hashes() {
             progress: false,
             interrupt: Some(Arc::new(AtomicBool::new(true))),
             max_particles: None,
+            overwrite: false,
         },
     )
     .unwrap();
@@ -255,4 +257,144 @@ fn a_pour_killed_while_pouring_resumes_to_the_same_bits() {
     let resumed = resume(&partial);
     assert_same_run(&read_run(&resumed).unwrap(), &reference);
     verify_ok(&resumed);
+}
+
+fn run_smoke(out: &Path, extra: &[&str]) -> std::process::Output {
+    runner()
+        .arg(common::experiment("smoke_2d.yaml"))
+        .arg("--out")
+        .arg(out)
+        .arg("-q")
+        .args(extra)
+        .output()
+        .unwrap()
+}
+
+fn refused_with(out: &std::process::Output, fragments: &[&str]) {
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(out.stdout.is_empty(), "no file path printed");
+    for f in fragments {
+        assert!(stderr.contains(f), "{f:?} not in: {stderr}");
+    }
+}
+
+#[test]
+fn a_finished_run_is_replaced_only_when_asked() {
+    let dir = tempfile::tempdir().unwrap();
+    let first = run_smoke(dir.path(), &[]);
+    assert!(first.status.success());
+    let path = only_file(dir.path());
+    let bytes = std::fs::read(&path).unwrap();
+    refused_with(
+        &run_smoke(dir.path(), &[]),
+        &["already exists", "--overwrite", "runner verify"],
+    );
+    assert_eq!(std::fs::read(&path).unwrap(), bytes, "left as it was");
+    assert_eq!(only_file(dir.path()), path, "no .partial left behind");
+    // --overwrite runs again: the same experiment and build give the same checkpoints.
+    assert!(run_smoke(dir.path(), &["--overwrite"]).status.success());
+    assert_eq!(only_file(dir.path()), path);
+    assert_eq!(
+        hashes(&read_run(&path).unwrap()),
+        hashes(&read_run_bytes(&bytes))
+    );
+    verify_ok(&path);
+}
+
+fn read_run_bytes(bytes: &[u8]) -> RunFile {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("copy.mcap");
+    std::fs::write(&path, bytes).unwrap();
+    read_run(&path).unwrap()
+}
+
+#[test]
+fn a_run_being_written_is_left_alone_by_a_second_runner_and_by_resume() {
+    // About 20000 steps (several seconds): still running while the others are refused.
+    let sets = ["--set", "time.end_s=20", "--threads", "1"];
+    let dir = tempfile::tempdir().unwrap();
+    let mut child = start_with("smoke_2d.yaml", &sets, dir.path());
+    let partial = wait_for_checkpoints(dir.path(), 2);
+    let busy = ["another runner is writing", ".partial"];
+    refused_with(&run_smoke(dir.path(), &sets), &busy);
+    let mut overwrite = sets.to_vec();
+    overwrite.push("--overwrite");
+    refused_with(&run_smoke(dir.path(), &overwrite), &busy);
+    let out = runner()
+        .args(["resume", "-q"])
+        .arg(&partial)
+        .output()
+        .unwrap();
+    refused_with(&out, &busy);
+    // The first run was not disturbed: stopped now, it finishes its file as usual.
+    signal(&child, "-INT");
+    assert_eq!(child.wait().unwrap().code(), Some(130));
+    let file = only_file(dir.path());
+    assert_eq!(
+        read_run(&file).unwrap().summary.unwrap().outcome,
+        "interrupted"
+    );
+    verify_ok(&file);
+}
+
+#[test]
+fn a_killed_runs_partial_is_kept_until_resumed_or_overwritten() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut child = start(dir.path());
+    let partial = wait_for_checkpoints(dir.path(), 3);
+    child.kill().unwrap();
+    child.wait().unwrap();
+    let bytes = std::fs::read(&partial).unwrap();
+    refused_with(
+        &run_smoke(dir.path(), &SETS),
+        &["holds an unfinished run", "runner resume", "--overwrite"],
+    );
+    assert_eq!(std::fs::read(&partial).unwrap(), bytes, "kept as it was");
+    let resumed = resume(&partial);
+    assert_eq!(only_file(dir.path()), resumed);
+    assert_eq!(
+        read_run(&resumed).unwrap().summary.unwrap().outcome,
+        "completed"
+    );
+}
+
+/// Many recorders of one run file at once, in one process (the lock is per open file, so
+/// threads contend as processes do): exactly one gets to write it, the others are refused
+/// and nothing they did shows in the file.
+#[test]
+fn concurrent_recorders_of_one_file_get_it_once() {
+    use mps_runner::record::{Outcome, RecordError, Recorder};
+    use std::sync::Barrier;
+    let dir = tempfile::tempdir().unwrap();
+    let resolved = common::resolve("smoke_2d.yaml", &[]);
+    let path = mps_runner::run::output_path(dir.path(), &resolved);
+    let header = mps_runner::run::run_header(&resolved, 1);
+    let barrier = Barrier::new(8);
+    let results: Vec<Result<Recorder, RecordError>> = std::thread::scope(|s| {
+        let handles: Vec<_> = (0..8)
+            .map(|_| {
+                s.spawn(|| {
+                    barrier.wait();
+                    Recorder::create(&path, &header)
+                })
+            })
+            .collect();
+        handles.into_iter().map(|h| h.join().unwrap()).collect()
+    });
+    let (winners, refused): (Vec<_>, Vec<_>) = results.into_iter().partition(Result::is_ok);
+    assert_eq!(winners.len(), 1);
+    for r in &refused {
+        let e = r.as_ref().err().unwrap();
+        assert!(matches!(e, RecordError::Busy { .. }), "{e}");
+    }
+    let recorder = winners.into_iter().next().unwrap().unwrap();
+    let summary = mps_runner::proto::mps::v1::Summary::default();
+    let finished = recorder.finish(0, &summary, &Outcome::Completed).unwrap();
+    assert_eq!(finished, path);
+    assert!(read_run(&path).unwrap().complete);
+    assert!(matches!(
+        Recorder::create(&path, &header),
+        Err(RecordError::Exists { .. })
+    ));
 }

@@ -323,6 +323,7 @@ fn run_sweep_library_and_failed_points() {
         workers: Some(1),
         interrupt: None,
         max_particles: None,
+        overwrite: false,
     };
     let (folder, outcomes) = run_sweep(&s, &options, &|_| {});
     assert_eq!(outcomes.iter().map(|o| o.index).collect::<Vec<_>>(), [0, 1]);

@@ -5,10 +5,10 @@
 use clap::{Parser, Subcommand};
 use mps_runner::experiment;
 use mps_runner::manifest::sweep;
-use mps_runner::record::Outcome;
+use mps_runner::record::{Outcome, RecordError};
 use mps_runner::report;
 use mps_runner::resume::{ResumeError, ResumeOptions, resume};
-use mps_runner::run::{RunOptions, run};
+use mps_runner::run::{RunError, RunOptions, run};
 use mps_runner::sweep_run::{SweepOptions, run_sweep};
 use mps_runner::verify::trend::{TrendOptions, trend};
 use mps_runner::verify::{VerifyOptions, verify};
@@ -61,6 +61,10 @@ struct RunArgs {
     /// No progress lines on stderr.
     #[arg(long, short)]
     quiet: bool,
+    /// Run even if this experiment's file (or a killed run's .partial) is already in the
+    /// output folder, and replace it once the new file is finished (default: refuse, exit 2).
+    #[arg(long)]
+    overwrite: bool,
     /// Sweeps only: summary metric(s) to plot into the sweep folder (repeatable; default:
     /// every summary metric that is not a count or bookkeeping).
     #[arg(long = "plot-y", value_name = "METRIC")]
@@ -468,9 +472,9 @@ fn resume_command(file: &std::path::Path, threads: Option<usize>, quiet: bool) -
             eprintln!("error: {e}");
             ExitCode::from(EXIT_BAD_INPUT)
         }
-        Err(e) => {
-            eprintln!("error: {e}");
-            ExitCode::from(EXIT_INTERNAL)
+        Err(ResumeError::Run(e)) => {
+            print_run_error(&e);
+            ExitCode::from(run_error_code(&e))
         }
     }
 }
@@ -524,11 +528,13 @@ fn bench_command(
         progress: false,
         interrupt: interrupt_flag(),
         max_particles: Some(DEFAULT_MAX_PARTICLES),
+        // A benchmark measures; its file is a by-product, replaced by the next one.
+        overwrite: true,
     };
     let result = match run(&resolved, &options) {
         Ok(r) => r,
         Err(e) => {
-            eprintln!("error: {e}");
+            print_run_error(&e);
             return ExitCode::from(run_error_code(&e));
         }
     };
@@ -629,6 +635,7 @@ fn run_command(args: RunArgs) -> ExitCode {
         progress: !args.quiet,
         interrupt: interrupt_flag(),
         max_particles: Some(args.max_particles),
+        overwrite: args.overwrite,
     };
     if !args.quiet {
         eprintln!(
@@ -665,18 +672,40 @@ fn run_command(args: RunArgs) -> ExitCode {
             outcome_code(&result.outcome)
         }
         Err(e) => {
-            eprintln!("error: {e}");
+            print_run_error(&e);
             ExitCode::from(run_error_code(&e))
         }
     }
 }
 
-/// Exit code of a run that could not be made: 2 for a run refused as too large (bad
-/// input), 1 for a recording that failed.
-fn run_error_code(e: &mps_runner::run::RunError) -> u8 {
+/// Exit code of a run that could not be made: 2 for a run refused before anything was
+/// written (too large, or its file exists, is being written, or holds a killed run), 1 for a
+/// recording that failed.
+fn run_error_code(e: &RunError) -> u8 {
     match e {
-        mps_runner::run::RunError::TooLarge { .. } => EXIT_BAD_INPUT,
+        RunError::TooLarge { .. } => EXIT_BAD_INPUT,
+        RunError::Record(r) if r.is_refusal() => EXIT_BAD_INPUT,
         _ => EXIT_INTERNAL,
+    }
+}
+
+/// Prints why a run could not be made, with what to do about a refusal.
+fn print_run_error(e: &RunError) {
+    eprintln!("error: {e}");
+    let RunError::Record(r) = e else { return };
+    match r {
+        RecordError::Exists { path } => eprintln!(
+            "hint: `runner verify {}` replays it; --overwrite runs the experiment again and replaces the file when the new one is finished; --out writes elsewhere",
+            path.display()
+        ),
+        RecordError::Busy { .. } => {
+            eprintln!("hint: wait for that run to finish, or write elsewhere with --out")
+        }
+        RecordError::Unfinished { path } => eprintln!(
+            "hint: `runner resume {}` continues it from its last checkpoint; --overwrite discards it and starts again",
+            path.display()
+        ),
+        _ => {}
     }
 }
 
@@ -703,6 +732,7 @@ fn sweep_command(s: &experiment::Sweep, args: &RunArgs) -> ExitCode {
         workers: args.threads,
         interrupt: interrupt_flag(),
         max_particles: Some(args.max_particles),
+        overwrite: args.overwrite,
     };
     let on_done = |o: &mps_runner::sweep_run::PointOutcome| match &o.result {
         Ok(r) => {
@@ -765,7 +795,7 @@ fn sweep_command(s: &experiment::Sweep, args: &RunArgs) -> ExitCode {
                 Outcome::Failed(_) => code = ExitCode::from(EXIT_SIM_FAILED),
                 Outcome::Interrupted(_) => return ExitCode::from(EXIT_INTERRUPTED),
             },
-            Err(_) => return ExitCode::from(EXIT_INTERNAL),
+            Err(e) => return ExitCode::from(run_error_code(e)),
         }
     }
     code

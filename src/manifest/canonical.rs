@@ -6,8 +6,9 @@
 //! round-trip form, `-0.0` written as `0.0`, integers as integers. Settings added after the
 //! format was first used are left out while they are at their original behaviour
 //! (`mps.ppe_preconditioner: jacobi`, `stop.rest_*` without `stop.rest_metric`, null
-//! `mps.wall_collision_*`, an empty `boundaries` section), so every experiment keeps the hash it had before they existed and files written
-//! then still verify. JSON is YAML, so the canonical text loads back through
+//! `mps.wall_collision_*`, `time.dt_min_s` and `stop.max_ghost_particles`, an empty
+//! `boundaries` section), so every experiment keeps the hash it had before they existed and
+//! files written then still verify. JSON is YAML, so the canonical text loads back through
 //! [`super::from_str`] to the same manifest and hash.
 
 use serde_json::Value;
@@ -37,12 +38,17 @@ pub fn canonical_text<S: SceneSection>(manifest: &Manifest<S>) -> String {
     {
         mps.remove("ppe_preconditioner");
     }
-    if let Some(mps) = value.get_mut("mps").and_then(Value::as_object_mut) {
+    for (section, key) in [
+        ("mps", "wall_collision_distance"),
+        ("mps", "wall_collision_second_pass"),
+        ("time", "dt_min_s"),
+        ("stop", "max_ghost_particles"),
+    ] {
         // null = the rule that held before these fields existed.
-        for key in ["wall_collision_distance", "wall_collision_second_pass"] {
-            if mps.get(key).is_some_and(Value::is_null) {
-                mps.remove(key);
-            }
+        if let Some(map) = value.get_mut(section).and_then(Value::as_object_mut)
+            && map.get(key).is_some_and(Value::is_null)
+        {
+            map.remove(key);
         }
     }
     if manifest.boundaries.is_empty()

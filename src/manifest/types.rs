@@ -52,6 +52,18 @@ impl<S: SceneSection> Manifest<S> {
     pub fn scene_kind(&self) -> &'static str {
         self.scene.kind_name()
     }
+
+    /// The smallest time step the run may take: `time.dt_min_s`, or when null
+    /// min(courant spacing_m / stop.max_speed_m_s, time.dt_max_s): the smallest step the
+    /// CFL rule gives below the speed guard, so the default never fires before the guard.
+    pub fn dt_min_s(&self) -> f64 {
+        self.time
+            .dt_min_s
+            .unwrap_or_else(|| {
+                (self.time.courant * self.spacing_m / self.stop.max_speed_m_s)
+                    .min(self.time.dt_max_s)
+            })
+    }
 }
 
 /// What the manifest needs to know of a `scene:` section. The sections themselves belong to
@@ -87,6 +99,10 @@ pub struct Time {
     /// Courant number of the CFL time-step condition.
     #[serde(default = "default_courant")]
     pub courant: f64,
+    /// Smallest time step a run may take (s); a step forced below it fails the run (the
+    /// last step to `end_s` excepted). null = see [`Manifest::dt_min_s`].
+    #[serde(default)]
+    pub dt_min_s: Option<f64>,
 }
 
 fn default_dt_max_s() -> f64 {
@@ -378,6 +394,10 @@ pub struct Stop {
     /// has been lifted).
     #[serde(default = "default_non_flowing_after_s")]
     pub rest_after_s: f64,
+    /// Fluid that leaves the domain box becomes a ghost (README); a run with more ghosts than
+    /// this fails (0: the first particle to leave fails it). null = no limit.
+    #[serde(default)]
+    pub max_ghost_particles: Option<u64>,
 }
 
 fn default_rest_metric_change() -> f64 {
@@ -398,6 +418,7 @@ impl Default for Stop {
             rest_metric: None,
             rest_metric_change: default_rest_metric_change(),
             rest_after_s: default_non_flowing_after_s(),
+            max_ghost_particles: None,
         }
     }
 }
@@ -445,6 +466,7 @@ pub(crate) fn samples<S: SceneSection>() -> Vec<Manifest<S>> {
                 end_s: 1.0,
                 dt_max_s: default_dt_max_s(),
                 courant: default_courant(),
+                dt_min_s: None,
             },
             fluid: fluids[i.min(fluids.len() - 1)].clone(),
             mps: Mps::default(),

@@ -49,6 +49,19 @@ pub fn check<S: SceneSection>(m: &Manifest<S>) -> Vec<Issue> {
         m.time.courant,
         between(0.0, false, 1.0, true),
     );
+    if let Some(dt_min_s) = m.time.dt_min_s
+        && c.real("time.dt_min_s", dt_min_s, POSITIVE)
+        && dt_min_s > m.time.dt_max_s
+    {
+        c.fail(
+            "time.dt_min_s",
+            format!(
+                "must be <= time.dt_max_s = {}, got {}",
+                fmt_num(m.time.dt_max_s),
+                fmt_num(dt_min_s)
+            ),
+        );
+    }
 
     // fluid
     match &m.fluid {
@@ -233,6 +246,18 @@ pub fn check<S: SceneSection>(m: &Manifest<S>) -> Vec<Issue> {
                 format!(
                     "must be >= time.end_s / {MAX_OUTPUTS:e} = {} (at most {MAX_OUTPUTS:e} outputs of each kind), got {}",
                     fmt_num(m.time.end_s / MAX_OUTPUTS),
+                    fmt_num(interval)
+                ),
+            );
+        } else if interval < m.dt_min_s() * (1.0 - 1e-9) {
+            // Only one output per step is ever written: a smaller interval is a typo. (The
+            // bound is shown to 4 digits, so the slack keeps an interval equal to it allowed.)
+            let bound: f64 = format!("{:.4e}", m.dt_min_s()).parse().unwrap_or(0.0);
+            c.fail(
+                field,
+                format!(
+                    "must be >= the smallest time step {} s (time.dt_min_s; when null, the CFL step at stop.max_speed_m_s, at most time.dt_max_s), got {}",
+                    fmt_num(bound),
                     fmt_num(interval)
                 ),
             );

@@ -50,9 +50,12 @@ pub struct SolverConfig<const D: usize> {
     pub dt_max_s: f64,
     /// Blow-up guard: a step fails when a particle gets faster than this.
     pub max_speed_m_s: f64,
-    /// Fluid particles must stay inside this box.
+    /// Fluid that leaves this box becomes a ghost.
     pub domain_min_m: Vector<D>,
     pub domain_max_m: Vector<D>,
+    /// A step fails once more fluid particles than this have left the domain box (None = no
+    /// limit).
+    pub max_ghost_particles: Option<usize>,
     /// Walls that move on time-pure paths (the slump cone), applied in order.
     pub bodies: Vec<RigidBody<D>>,
     /// Openings that pour fluid, served in order at the start of each step.
@@ -122,6 +125,30 @@ pub enum StepError {
         limit_m_s: f64,
         step: u64,
     },
+    #[error(
+        "time step {dt_s:.3e} s is below the smallest allowed, {min_s:.3e} s (time.dt_min_s), at step {step}: the fastest particle moves at {speed_m_s:.3e} m/s"
+    )]
+    TimeStepTooSmall {
+        dt_s: f64,
+        min_s: f64,
+        speed_m_s: f64,
+        step: u64,
+    },
+    #[error(
+        "particle {particle} left the domain box at {position_m} (step {step}): {ghosts} particles have left it, more than stop.max_ghost_particles = {limit}"
+    )]
+    LeftDomain {
+        particle: usize,
+        /// Where it left, formatted `(x, y[, z]) m`.
+        position_m: String,
+        ghosts: usize,
+        limit: usize,
+        step: u64,
+    },
+    #[error(
+        "the {solve} solve met a non-finite value (NaN or infinity) at step {step}: the state entering it is not finite"
+    )]
+    NonFiniteSolve { solve: &'static str, step: u64 },
     #[error(
         "viscosity solve did not converge: relative residual {residual:.3e} after {iterations} iterations (step {step})"
     )]
@@ -299,6 +326,12 @@ impl<const D: usize> Solver<D> {
         );
         self.timing.viscosity_s += viscosity_started.elapsed().as_secs_f64();
         self.timing.viscosity_iterations += u64::from(stage.solve.iterations);
+        if stage.solve.relative_residual.is_nan() {
+            return Err(StepError::NonFiniteSolve {
+                solve: "viscosity",
+                step: self.step,
+            });
+        }
         if !stage.solve.converged {
             return Err(StepError::ViscosityNotConverged {
                 residual: stage.solve.relative_residual,
@@ -346,6 +379,12 @@ impl<const D: usize> Solver<D> {
         self.timing.pressure_solve_s += solve_s;
         self.timing.ppe_iterations += u64::from(ppe.iterations);
         self.timing.pressure_assembly_s += pressure_started.elapsed().as_secs_f64() - solve_s;
+        if ppe.relative_residual.is_nan() {
+            return Err(StepError::NonFiniteSolve {
+                solve: "pressure",
+                step: self.step,
+            });
+        }
         if !ppe.converged {
             return Err(StepError::PressureNotConverged {
                 residual: ppe.relative_residual,
@@ -770,6 +809,19 @@ impl<const D: usize> Solver<D> {
                 self.listed_at_m.clear();
                 p.velocity_m_s[i] = Vector::<D>::zeros();
                 p.pressure_pa[i] = 0.0;
+                if let Some(limit) = c.max_ghost_particles {
+                    let ghosts = p.count(ParticleKind::Ghost);
+                    if ghosts > limit {
+                        let coords: Vec<String> = x.iter().map(|a| format!("{a:.4}")).collect();
+                        return Err(StepError::LeftDomain {
+                            particle: i,
+                            position_m: format!("({}) m", coords.join(", ")),
+                            ghosts,
+                            limit,
+                            step: self.step,
+                        });
+                    }
+                }
             }
         }
         Ok(())

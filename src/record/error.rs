@@ -24,6 +24,27 @@ pub enum RecordError {
     },
     #[error("{}: not a valid run file: {reason}", path.display())]
     Invalid { path: PathBuf, reason: String },
+    /// The run's file exists already (a finished run of the same experiment) and replacing it
+    /// was not asked for.
+    #[error("{} already exists: a finished run of this same experiment", path.display())]
+    Exists { path: PathBuf },
+    /// Another process holds the lock on the `.partial` file: it is writing this run now.
+    #[error("another runner is writing {} now (the file is locked)", path.display())]
+    Busy { path: PathBuf },
+    /// A `.partial` file no process holds: a killed run's, with its checkpoints.
+    #[error("{} holds an unfinished run (killed, or stopped by a crash)", path.display())]
+    Unfinished { path: PathBuf },
+}
+
+impl RecordError {
+    /// True for the refusals to start writing (the file exists, is being written, or holds an
+    /// unfinished run): nothing was written.
+    pub fn is_refusal(&self) -> bool {
+        matches!(
+            self,
+            RecordError::Exists { .. } | RecordError::Busy { .. } | RecordError::Unfinished { .. }
+        )
+    }
 }
 
 pub type Result<T, E = RecordError> = std::result::Result<T, E>;

@@ -131,6 +131,74 @@ pub fn partial_path(final_path: &Path) -> PathBuf {
     PathBuf::from(name)
 }
 
+/// Whether [`Recorder::create_with`] may replace what a run of the same experiment left.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Existing {
+    /// Refuse when the final file or a killed run's `.partial` exists.
+    #[default]
+    Refuse,
+    /// Replace both (the new file takes the final name only when it is finished).
+    Replace,
+}
+
+/// Opens and locks `partial` for writing, empty, after the checks of [`Existing`].
+fn claim(final_path: &Path, partial: &Path, existing: Existing) -> Result<File> {
+    let refuse = existing == Existing::Refuse;
+    let exists = |path: &Path| path.try_exists().unwrap_or(true);
+    if refuse && exists(final_path) {
+        return Err(RecordError::Exists {
+            path: final_path.to_path_buf(),
+        });
+    }
+    let file = fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .create(true)
+        .truncate(false)
+        .open(partial)
+        .map_err(io_err(partial))?;
+    match file.try_lock() {
+        Ok(()) => {}
+        Err(fs::TryLockError::WouldBlock) => {
+            return Err(RecordError::Busy {
+                path: partial.to_path_buf(),
+            });
+        }
+        Err(fs::TryLockError::Error(e)) => return Err(io_err(partial)(e)),
+    }
+    let len = file.metadata().map_err(io_err(partial))?.len();
+    // The final file may have appeared while the lock was taken (a runner that finished).
+    if refuse && exists(final_path) {
+        if len == 0 {
+            let _ = fs::remove_file(partial);
+        }
+        return Err(RecordError::Exists {
+            path: final_path.to_path_buf(),
+        });
+    }
+    if refuse && len > 0 {
+        return Err(RecordError::Unfinished {
+            path: partial.to_path_buf(),
+        });
+    }
+    file.set_len(0).map_err(io_err(partial))?;
+    Ok(file)
+}
+
+/// Takes the lock a writing [`Recorder`] holds on a `.partial` file, for a process that is
+/// about to take the file over (resume); `Busy` when a runner is still writing it. Hold the
+/// returned handle until done: the lock follows the file through a rename.
+pub fn lock_unfinished(partial: &Path) -> Result<File> {
+    let file = File::open(partial).map_err(io_err(partial))?;
+    match file.try_lock() {
+        Ok(()) => Ok(file),
+        Err(fs::TryLockError::WouldBlock) => Err(RecordError::Busy {
+            path: partial.to_path_buf(),
+        }),
+        Err(fs::TryLockError::Error(e)) => Err(io_err(partial)(e)),
+    }
+}
+
 /// Writes one run file. See the module documentation for the layout.
 ///
 /// Dropping a `Recorder` without [`finish`](Recorder::finish) closes the open chunk and leaves
@@ -148,11 +216,26 @@ pub struct Recorder {
 }
 
 impl Recorder {
-    /// Creates (or truncates) `<final_path>.partial`, and writes the header, the start
-    /// metadata, the manifest attachment, schemas and channels. The result is synced to disk.
+    /// Creates `<final_path>.partial`, and writes the header, the start metadata, the manifest
+    /// attachment, schemas and channels. The result is synced to disk. Refuses (nothing
+    /// written) when `final_path` exists, when another process is writing the same run, or
+    /// when a killed run's `.partial` is there: see [`Recorder::create_with`].
     pub fn create(final_path: &Path, header: &RunHeader) -> Result<Recorder> {
+        Self::create_with(final_path, header, Existing::Refuse)
+    }
+
+    /// [`Recorder::create`], with `existing` saying whether an existing final file or a
+    /// killed run's `.partial` may be replaced. The `.partial` file is locked (an exclusive
+    /// advisory lock, released when the recorder is dropped) in either case, so two processes
+    /// never write the same run file; a replaced final file is only replaced by the atomic
+    /// rename of [`Recorder::finish`].
+    pub fn create_with(
+        final_path: &Path,
+        header: &RunHeader,
+        existing: Existing,
+    ) -> Result<Recorder> {
         let partial = partial_path(final_path);
-        let file = File::create(&partial).map_err(io_err(&partial))?;
+        let file = claim(final_path, &partial, existing)?;
         let sync_handle = file.try_clone().map_err(io_err(&partial))?;
         let options = mcap::WriteOptions::new()
             .compression(Some(mcap::Compression::Zstd))

@@ -76,6 +76,10 @@ pub fn solver_config<const D: usize>(m: &Manifest, scene: &Scene<D>) -> SolverCo
         max_speed_m_s: m.stop.max_speed_m_s,
         domain_min_m: scene.domain_min_m,
         domain_max_m: scene.domain_max_m,
+        max_ghost_particles: m
+            .stop
+            .max_ghost_particles
+            .map(|n| usize::try_from(n).unwrap_or(usize::MAX)),
         bodies: scene.bodies.clone(),
         inlets: scene.inlets.clone(),
     }

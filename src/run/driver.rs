@@ -4,7 +4,7 @@ use super::RunError;
 use super::frames::{cloud, diagnostics, time_ns};
 use crate::checkpoint;
 use crate::experiment::{Manifest, experiment_metrics};
-use crate::mps::{ParticleKind, Solver};
+use crate::mps::{ParticleKind, Solver, StepError};
 use crate::proto::foxglove::PointCloud;
 use crate::proto::mps::v1::{CheckpointHash, Diagnostics, StateCheckpoint, Summary};
 use crate::record::{Outcome, Recorder};
@@ -149,6 +149,7 @@ pub fn time_loop<const D: usize>(
     let mut stop_reason = String::new();
     let mut report = None;
     let mut dt_s = solver.next_dt_s(end_s);
+    let dt_min_s = m.dt_min_s();
     let frames = sink.wants_frames();
     // The rest metric at the previous checkpoint. A restored run starts at a checkpoint, so
     // its value is that of the restored state: replays and resumed runs stop where the run
@@ -213,6 +214,18 @@ pub fn time_loop<const D: usize>(
         }
         if !sink.keep_going() {
             outcome = Outcome::Interrupted("stopped by the output".to_string());
+            break;
+        }
+        // A step forced below the minimum (the last one, cut to reach end_s, excepted) means
+        // the flow has run away: fail before taking it.
+        if dt_s < dt_min_s && dt_s < end_s - solver.time_s {
+            let e = StepError::TimeStepTooSmall {
+                dt_s,
+                min_s: dt_min_s,
+                speed_m_s: solver.max_fluid_speed_m_s(),
+                step: solver.step,
+            };
+            outcome = Outcome::Failed(e.to_string());
             break;
         }
         match solver.step(dt_s) {

@@ -15,7 +15,7 @@ pub use frames::time_ns;
 use crate::experiment::{Resolved, build_scene};
 use crate::mps::{Solver, StageTimes};
 use crate::proto::mps::v1::Summary;
-use crate::record::{Outcome, RecordError, Recorder, RunHeader};
+use crate::record::{Existing, Outcome, RecordError, Recorder, RunHeader};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
@@ -34,6 +34,9 @@ pub struct RunOptions {
     /// anything is allocated or written ([`crate::experiment::estimate_particles`]); None =
     /// no limit.
     pub max_particles: Option<u64>,
+    /// Replace the run's file (and a killed run's `.partial`) if it exists; the default
+    /// refuses ([`Recorder::create`]).
+    pub overwrite: bool,
 }
 
 /// What a finished run produced.
@@ -165,7 +168,12 @@ fn run_in<const D: usize>(
     let config = solver_config(m, &scene);
     let mut solver = Solver::new(config, scene.particles);
     let path = output_path(&options.out_dir, resolved);
-    let mut recorder = Recorder::create(&path, &run_header(resolved, threads))?;
+    let existing = if options.overwrite {
+        Existing::Replace
+    } else {
+        Existing::Refuse
+    };
+    let mut recorder = Recorder::create_with(&path, &run_header(resolved, threads), existing)?;
     let started = std::time::Instant::now();
     let control = LoopControl {
         interrupt: options.interrupt.clone(),

@@ -40,6 +40,7 @@ pub fn run_in(resolved: &Resolved, out_dir: &Path, threads: usize) -> RunResult 
             progress: false,
             interrupt: None,
             max_particles: None,
+            overwrite: false,
         },
     )
     .expect("run")

@@ -64,6 +64,7 @@ pub fn config<const D: usize>(
         max_speed_m_s: 50.0,
         domain_min_m,
         domain_max_m,
+        max_ghost_particles: None,
         bodies: Vec::new(),
         inlets: Vec::new(),
     }
