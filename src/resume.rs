@@ -8,9 +8,7 @@
 use crate::checkpoint;
 use crate::experiment::Resolved;
 use crate::proto::mps::v1::{CheckpointHash, StateCheckpoint};
-use crate::record::{
-    Existing, PARTIAL_SUFFIX, Recorder, lock_unfinished, partial_path, read_run,
-};
+use crate::record::{Existing, PARTIAL_SUFFIX, Recorder, lock_unfinished, partial_path, read_run};
 use crate::restore::{Logged, is_scheduled, manifest_of, read_messages, restore_solver};
 use crate::run::{LoopControl, LoopStart, RunError, RunResult, output_path, time_loop, time_ns};
 use std::path::{Path, PathBuf};

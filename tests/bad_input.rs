@@ -25,8 +25,14 @@ const CASES: &[(&[&str], &str)] = &[
         &["--set", "time.dt_min_s=0.01"],
         "time.dt_min_s: must be <= time.dt_max_s = 0.001, got 0.01",
     ),
-    (&["--set", "time.dt_min_s=-1e-4"], "time.dt_min_s: must be > 0"),
-    (&["--set", "stop.max_ghost_particles=-1"], "stop.max_ghost_particles"),
+    (
+        &["--set", "time.dt_min_s=-1e-4"],
+        "time.dt_min_s: must be > 0",
+    ),
+    (
+        &["--set", "stop.max_ghost_particles=-1"],
+        "stop.max_ghost_particles",
+    ),
     (&["--set", "spacing_m=-1"], "spacing_m: must be > 0"),
     (&["--set", "spacing_m=.nan"], "spacing_m"),
     (&["--set", "dimension=4"], "dimension: must be 2 or 3"),

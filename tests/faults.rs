@@ -32,7 +32,10 @@ fn jet_manifest(dir: &Path) -> PathBuf {
 fn assert_fails(manifest: &Path, sets: &[&str], reason: &str) -> String {
     let dir = tempfile::tempdir().unwrap();
     let mut cmd = runner();
-    cmd.arg(manifest).arg("--out").arg(dir.path()).arg("--quiet");
+    cmd.arg(manifest)
+        .arg("--out")
+        .arg(dir.path())
+        .arg("--quiet");
     for s in sets {
         cmd.args(["--set", s]);
     }
@@ -83,7 +86,11 @@ fn viscosity_solve_that_does_not_converge_fails_the_run() {
 fn speed_above_the_guard_fails_the_run() {
     let exp = common::experiment("smoke_2d.yaml");
     // The falling column passes 0.05 m/s within a few steps.
-    assert_fails(&exp, &["stop.max_speed_m_s=0.05"], "stop.max_speed_m_s = 0.05");
+    assert_fails(
+        &exp,
+        &["stop.max_speed_m_s=0.05"],
+        "stop.max_speed_m_s = 0.05",
+    );
 }
 
 #[test]
@@ -174,6 +181,10 @@ fn non_finite_state_fails_the_run_at_its_first_step() {
         .unwrap();
     let run = read_run(&path).unwrap();
     assert_eq!(run.summary.unwrap().outcome, "failed");
-    assert_eq!(run.states.len(), 1, "only the t = 0 checkpoint, none of the failed step");
+    assert_eq!(
+        run.states.len(),
+        1,
+        "only the t = 0 checkpoint, none of the failed step"
+    );
     assert_eq!(run.states[0].step, 0);
 }

@@ -98,3 +98,54 @@ fn the_3d_wall_collision_constants_are_manifest_fields_with_todays_values() {
     off.push("mps.wall_collision_second_pass=false");
     assert_ne!(final_hash(experiment, &off, 2), golden);
 }
+
+/// DESIGN.md section 6: no value the runner records or compares may come from a std
+/// transcendental function or `powi` (they call the platform's math library, whose last bits
+/// differ between platforms and versions): the library uses `libm` or plain products.
+#[test]
+fn the_library_calls_no_std_transcendental_function() {
+    const STD_MATH: &[&str] = &[
+        ".powf(",
+        ".powi(",
+        ".exp(",
+        ".exp2(",
+        ".exp_m1(",
+        ".ln(",
+        ".ln_1p(",
+        ".log(",
+        ".log2(",
+        ".log10(",
+        ".sin(",
+        ".cos(",
+        ".tan(",
+        ".sin_cos(",
+        ".asin(",
+        ".acos(",
+        ".atan(",
+        ".atan2(",
+        ".sinh(",
+        ".cosh(",
+        ".tanh(",
+        ".cbrt(",
+        ".hypot(",
+    ];
+    let mut found = Vec::new();
+    let mut files = vec![common::root().join("src")];
+    while let Some(path) = files.pop() {
+        if path.is_dir() {
+            files.extend(std::fs::read_dir(&path).unwrap().map(|e| e.unwrap().path()));
+            continue;
+        }
+        if path.extension().is_none_or(|e| e != "rs") {
+            continue;
+        }
+        let text = std::fs::read_to_string(&path).unwrap();
+        for (n, line) in text.lines().enumerate() {
+            let code = line.split("//").next().unwrap_or("");
+            for f in STD_MATH.iter().filter(|f| code.contains(*f)) {
+                found.push(format!("{}:{}: {f}", path.display(), n + 1));
+            }
+        }
+    }
+    assert!(found.is_empty(), "use libm instead:\n{}", found.join("\n"));
+}

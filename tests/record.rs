@@ -196,7 +196,11 @@ fn round_trip_of_a_finished_run() {
     );
     expected.insert(
         "run".to_string(),
-        map(&[("threads", "4"), ("mcap_format", "mps.v1")]),
+        map(&[
+            ("threads", "4"),
+            ("mcap_format", "mps.v1"),
+            ("math", "libm"),
+        ]),
     );
     expected.insert(
         "outcome".to_string(),

@@ -10,6 +10,11 @@
 pub mod boundaries;
 pub mod geometry;
 
+/// Summary metrics that builds before `run.math` (see [`crate::record::MATH`]) computed with
+/// the platform's `pow` (std `powf`): in files without that entry they may differ from this
+/// build's libm value in the last bit, which `runner verify` reports as a note.
+pub const PLATFORM_POW_METRICS: &[&str] = &["closed_form_radius_m"];
+
 use crate::manifest::validate::Checker;
 use crate::manifest::{self, Fluid, SceneSection};
 use crate::mps::{self, Inlet, ParticleKind, Particles, RigidBody, Vector};

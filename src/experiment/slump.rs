@@ -445,9 +445,9 @@ pub fn surface_height_m<const D: usize>(
 
 /// Roussel & Coussot (2005), thin "pancake" regime: final radius of a yield-stress fluid of
 /// volume V spread on a plane, R = (225 rho g V^2 / (128 pi^2 tau_0))^(1/5).
-/// Known exception to the no-std-`powf` rule (issue 14): this summary metric was recorded
-/// with std `powf` by every slump file so far, and libm's `pow` differs in the last bit for
-/// about 10 % of inputs, so switching would make those files fail `runner verify`.
+/// libm's `pow`, not std's (which calls the platform's): the summary records this value and
+/// `runner verify` compares it bit for bit. Files written before `run.math` was recorded
+/// used std `powf`; see [`crate::experiment::PLATFORM_POW_METRICS`].
 pub fn closed_form_radius_m(
     density_kg_m3: f64,
     gravity_m_s2: f64,
@@ -455,8 +455,11 @@ pub fn closed_form_radius_m(
     yield_stress_pa: f64,
 ) -> f64 {
     let pi2 = std::f64::consts::PI * std::f64::consts::PI;
-    (225.0 * density_kg_m3 * gravity_m_s2 * volume_m3 * volume_m3 / (128.0 * pi2 * yield_stress_pa))
-        .powf(0.2)
+    libm::pow(
+        225.0 * density_kg_m3 * gravity_m_s2 * volume_m3 * volume_m3
+            / (128.0 * pi2 * yield_stress_pa),
+        0.2,
+    )
 }
 
 /// The surface at rest of that pancake, h(r) = sqrt(2 tau_0 (R - r) / (rho g)) (0 beyond R).

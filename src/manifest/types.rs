@@ -57,12 +57,9 @@ impl<S: SceneSection> Manifest<S> {
     /// min(courant spacing_m / stop.max_speed_m_s, time.dt_max_s): the smallest step the
     /// CFL rule gives below the speed guard, so the default never fires before the guard.
     pub fn dt_min_s(&self) -> f64 {
-        self.time
-            .dt_min_s
-            .unwrap_or_else(|| {
-                (self.time.courant * self.spacing_m / self.stop.max_speed_m_s)
-                    .min(self.time.dt_max_s)
-            })
+        self.time.dt_min_s.unwrap_or_else(|| {
+            (self.time.courant * self.spacing_m / self.stop.max_speed_m_s).min(self.time.dt_max_s)
+        })
     }
 }
 

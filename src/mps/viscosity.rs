@@ -195,8 +195,7 @@ pub fn predict_velocity<const D: usize>(
     for report in reports {
         solve.iterations += report.iterations;
         // As f64::max, but a NaN (a non-finite system) is kept rather than dropped.
-        if report.relative_residual.is_nan() || report.relative_residual > solve.relative_residual
-        {
+        if report.relative_residual.is_nan() || report.relative_residual > solve.relative_residual {
             solve.relative_residual = report.relative_residual;
         }
         solve.converged &= report.converged;

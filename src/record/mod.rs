@@ -36,6 +36,11 @@ use crate::proto::foxglove::PointCloud;
 use crate::proto::mps::v1::{Diagnostics, StateCheckpoint, Summary};
 use error::{io_err, mcap_err};
 
+/// Value of `run.math`: the recorded closed forms take powers and roots from the `libm` crate
+/// (the same bits on every platform). Files without the entry were written by builds that
+/// used std (see [`crate::experiment::PLATFORM_POW_METRICS`]).
+pub const MATH: &str = "libm";
+
 /// Value of `run.mcap_format` and the header profile prefix.
 pub const MCAP_FORMAT: &str = "mps.v1";
 /// MCAP header profile of our files.
@@ -278,7 +283,11 @@ impl Recorder {
             ),
             (
                 META_RUN,
-                vec![("threads", &threads), ("mcap_format", MCAP_FORMAT)],
+                vec![
+                    ("threads", &threads),
+                    ("mcap_format", MCAP_FORMAT),
+                    ("math", MATH),
+                ],
             ),
         ];
         for (name, entries) in start_metadata {

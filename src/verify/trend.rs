@@ -111,7 +111,7 @@ pub fn power_fit(points: &[Point]) -> Option<PowerFit> {
     let logs: Vec<(f64, f64)> = points
         .iter()
         .filter(|p| p.x > 0.0 && p.y > 0.0)
-        .map(|p| (p.x.ln(), p.y.ln()))
+        .map(|p| (libm::log(p.x), libm::log(p.y)))
         .collect();
     let n = logs.len() as f64;
     if logs.len() < 2 {
@@ -132,7 +132,7 @@ pub fn power_fit(points: &[Point]) -> Option<PowerFit> {
         sxy * sxy / (sxx * syy)
     };
     Some(PowerFit {
-        a: (my - b * mx).exp(),
+        a: libm::exp(my - b * mx),
         b,
         r2,
         points: logs.len(),
