@@ -129,6 +129,13 @@ fn each_bad_input_is_refused_naming_the_field_with_exit_2_and_no_file() {
             .output()
             .unwrap();
         let stderr = String::from_utf8_lossy(&result.stderr);
+        // The table of inputs and messages (`-- --nocapture` shows it).
+        println!(
+            "| `{}` | {:?} | {} |",
+            args.join(" "),
+            result.status.code(),
+            stderr.lines().next().unwrap_or("").replace('|', "\\|")
+        );
         let files = std::fs::read_dir(out.path()).unwrap().count();
         if result.status.code() != Some(2) || !stderr.contains(fragment) || files != 0 {
             failures.push(format!(
