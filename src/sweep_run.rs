@@ -3,13 +3,20 @@
 //! `workers` threads each take the next point in expansion order and run it with
 //! `threads: Some(1)`. Each run is deterministic and independent of the thread count, so the
 //! files do not depend on the scheme; only the order in which points finish does.
+//!
+//! A sweep run again into its folder picks up where it was: a point whose finished file is
+//! there (completed or failed: a replay would fail the same way) is taken as it is, an
+//! interrupted one or a killed one's `.partial` is resumed ([`crate::resume`]), the rest run.
+//! `overwrite` runs every point again.
 
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-use crate::experiment::Sweep;
-use crate::run::{RunError, RunOptions, RunResult, run};
+use crate::experiment::{Resolved, Sweep};
+use crate::record::{Outcome, RecordError, partial_path, read_run};
+use crate::resume::{ResumeError, ResumeOptions, resume};
+use crate::run::{RunError, RunOptions, RunResult, output_path, run};
 
 /// How to run a sweep.
 #[derive(Debug, Clone, Default)]
@@ -22,8 +29,20 @@ pub struct SweepOptions {
     pub interrupt: Option<std::sync::Arc<std::sync::atomic::AtomicBool>>,
     /// Passed to every run (see [`RunOptions::max_particles`]).
     pub max_particles: Option<u64>,
-    /// Passed to every run (see [`RunOptions::overwrite`]).
+    /// Run every point again, replacing its file (see [`RunOptions::overwrite`]); the default
+    /// takes finished points as they are and resumes interrupted ones.
     pub overwrite: bool,
+}
+
+/// How a point's result came about.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PointStart {
+    /// Run from its initial state.
+    Ran,
+    /// Its finished file was already in the folder (from an earlier run of the sweep).
+    Existing,
+    /// Resumed from the last checkpoint of an interrupted or killed run of it.
+    Resumed,
 }
 
 /// How one point ended.
@@ -35,6 +54,7 @@ pub struct PointOutcome {
     pub label: String,
     /// The run (its outcome may be failed or interrupted), or why no file could be made.
     pub result: Result<RunResult, RunError>,
+    pub start: PointStart,
 }
 
 /// The sweep's output folder.
@@ -73,10 +93,12 @@ pub fn run_sweep(
                     let Some(point) = sweep.points.get(index) else {
                         break;
                     };
+                    let (result, start) = run_point(&point.resolved, &run_options);
                     let outcome = PointOutcome {
                         index,
                         label: point.label(),
-                        result: run(&point.resolved, &run_options),
+                        result,
+                        start,
                     };
                     let mut done = done.lock().unwrap_or_else(|e| e.into_inner());
                     on_done(&outcome);
@@ -88,4 +110,57 @@ pub fn run_sweep(
     let mut outcomes = done.into_inner().unwrap_or_else(|e| e.into_inner());
     outcomes.sort_by_key(|o| o.index);
     (dir, outcomes)
+}
+
+/// One point: its finished file taken as it is, an interrupted or killed run of it resumed,
+/// or a run (see the module documentation).
+fn run_point(
+    resolved: &Resolved,
+    options: &RunOptions,
+) -> (Result<RunResult, RunError>, PointStart) {
+    let path = output_path(&options.out_dir, resolved);
+    let partial = partial_path(&path);
+    if options.overwrite {
+        return (run(resolved, options), PointStart::Ran);
+    }
+    let resume_from = |source: &std::path::Path| {
+        let resume_options = ResumeOptions {
+            threads: options.threads,
+            progress: false,
+            interrupt: options.interrupt.clone(),
+        };
+        let result = match resume(source, &resume_options) {
+            Ok(r) => Ok(r.result),
+            Err(ResumeError::Run(e)) => Err(e),
+            Err(ResumeError::Unusable { path, reason }) => {
+                Err(RunError::Record(RecordError::Invalid { path, reason }))
+            }
+        };
+        (result, PointStart::Resumed)
+    };
+    if let Ok(file) = read_run(&path)
+        && file.complete
+        && let Some(summary) = file.summary
+        && summary.experiment_sha256 == resolved.hash_hex
+    {
+        let outcome = match summary.outcome.as_str() {
+            "completed" => Outcome::Completed,
+            "failed" => Outcome::Failed(summary.reason.clone()),
+            _ => return resume_from(&path),
+        };
+        let result = RunResult {
+            path,
+            outcome,
+            summary,
+            stop_reason: String::new(),
+            wall_time_s: 0.0,
+            timing: Default::default(),
+        };
+        return (Ok(result), PointStart::Existing);
+    }
+    if partial.exists() && !path.exists() {
+        return resume_from(&partial);
+    }
+    // Nothing usable there: run (a damaged file of the same name is refused, not replaced).
+    (run(resolved, options), PointStart::Ran)
 }

@@ -454,3 +454,64 @@ fn only_the_points_need_to_be_valid() {
     let e = sweep_err(&with_section("sweep:\n  gravity_m_s2: [1, 2\n"), &[]);
     assert!(matches!(e, ManifestError::Syntax { .. }), "{e}");
 }
+
+/// A sweep run again picks up where it was: interrupted points resume (to the bits of an
+/// uninterrupted sweep), finished points are taken as they are, `overwrite` runs them again.
+#[test]
+fn a_sweep_run_again_resumes_interrupted_points_and_keeps_finished_ones() {
+    use mps_runner::sweep_run::PointStart;
+    use std::sync::Arc;
+    use std::sync::atomic::AtomicBool;
+    let dir = tempfile::tempdir().unwrap();
+    let s = sweep_of(
+        &with_section("sweep:\n  gravity_m_s2: [9.81, 4]\n"),
+        &["time.end_s=0.02"],
+    );
+    let options = |out: &str, interrupted: bool, overwrite: bool| SweepOptions {
+        out_dir: dir.path().join(out),
+        workers: Some(2),
+        interrupt: Some(Arc::new(AtomicBool::new(interrupted))),
+        max_particles: None,
+        overwrite,
+    };
+    let hashes = |outcomes: &[mps_runner::sweep_run::PointOutcome]| -> Vec<Vec<String>> {
+        outcomes
+            .iter()
+            .map(|o| {
+                let r = o.result.as_ref().unwrap();
+                r.summary
+                    .checkpoints
+                    .iter()
+                    .map(|c| c.state_sha256.clone())
+                    .collect()
+            })
+            .collect()
+    };
+    let (_, reference) = run_sweep(&s, &options("ref", false, false), &|_| {});
+    // Interrupted before the first step: every point's file is finished as interrupted.
+    let (folder, first) = run_sweep(&s, &options("sweep", true, false), &|_| {});
+    for o in &first {
+        assert_eq!(o.result.as_ref().unwrap().summary.outcome, "interrupted");
+    }
+    let (_, second) = run_sweep(&s, &options("sweep", false, false), &|_| {});
+    for o in &second {
+        assert_eq!(o.start, PointStart::Resumed);
+        assert_eq!(o.result.as_ref().unwrap().summary.outcome, "completed");
+    }
+    assert_eq!(hashes(&second), hashes(&reference));
+    let files = report::run_files(&folder).unwrap();
+    assert_eq!(files.len(), 2);
+    let bytes: Vec<Vec<u8>> = files.iter().map(|f| std::fs::read(f).unwrap()).collect();
+    let (_, third) = run_sweep(&s, &options("sweep", false, false), &|_| {});
+    for o in &third {
+        assert_eq!(o.start, PointStart::Existing);
+    }
+    assert_eq!(hashes(&third), hashes(&reference));
+    let again: Vec<Vec<u8>> = files.iter().map(|f| std::fs::read(f).unwrap()).collect();
+    assert_eq!(again, bytes, "finished points are not written again");
+    let (_, fourth) = run_sweep(&s, &options("sweep", false, true), &|_| {});
+    for o in &fourth {
+        assert_eq!(o.start, PointStart::Ran);
+    }
+    assert_eq!(hashes(&fourth), hashes(&reference));
+}

@@ -9,7 +9,7 @@ use mps_runner::record::{Outcome, RecordError};
 use mps_runner::report;
 use mps_runner::resume::{ResumeError, ResumeOptions, resume};
 use mps_runner::run::{RunError, RunOptions, run};
-use mps_runner::sweep_run::{SweepOptions, run_sweep};
+use mps_runner::sweep_run::{PointStart, SweepOptions, run_sweep};
 use mps_runner::verify::trend::{TrendOptions, trend};
 use mps_runner::verify::{VerifyOptions, verify};
 use std::path::PathBuf;
@@ -736,8 +736,13 @@ fn sweep_command(s: &experiment::Sweep, args: &RunArgs) -> ExitCode {
     };
     let on_done = |o: &mps_runner::sweep_run::PointOutcome| match &o.result {
         Ok(r) => {
+            let start = match o.start {
+                PointStart::Ran => "",
+                PointStart::Existing => " (its file was there)",
+                PointStart::Resumed => " (resumed)",
+            };
             println!(
-                "[{}/{total}] {} {} {}",
+                "[{}/{total}] {} {} {}{start}",
                 o.index + 1,
                 o.label,
                 r.outcome.as_str(),
