@@ -891,12 +891,12 @@ fn metric_names_are_the_metrics_each_experiment_reports() {
         let m = &r.manifest;
         let measured: Vec<String> = if m.dimension == 2 {
             let scene = mps_runner::experiment::build_scene::<2>(m);
-            mps_runner::experiment::experiment_metrics(m, &scene.particles)
+            mps_runner::experiment::experiment_metrics(m, &scene.particles, 0.0)
                 .into_keys()
                 .collect()
         } else {
             let scene = mps_runner::experiment::build_scene::<3>(m);
-            mps_runner::experiment::experiment_metrics(m, &scene.particles)
+            mps_runner::experiment::experiment_metrics(m, &scene.particles, 0.0)
                 .into_keys()
                 .collect()
         };

@@ -38,6 +38,7 @@ impl Experiment for ColumnCollapse {
         &self,
         m: &Manifest,
         particles: &Particles<D>,
+        _time_s: f64,
         out: &mut BTreeMap<String, f64>,
     ) {
         let l0 = m.spacing_m;

@@ -52,6 +52,7 @@ impl Experiment for DamBreak {
         &self,
         _m: &Manifest,
         _particles: &Particles<D>,
+        _time_s: f64,
         _out: &mut BTreeMap<String, f64>,
     ) {
     }

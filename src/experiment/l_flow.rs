@@ -91,6 +91,7 @@ impl Experiment for LFlow {
         &self,
         m: &Manifest,
         particles: &Particles<D>,
+        _time_s: f64,
         out: &mut BTreeMap<String, f64>,
     ) {
         out.insert(

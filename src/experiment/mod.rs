@@ -53,11 +53,12 @@ pub trait Experiment {
     /// Names of the metrics [`Experiment::metrics`] adds for `m` (besides
     /// `front_position_m`, which every test reports).
     fn metric_names(&self, m: &Manifest) -> Vec<&'static str>;
-    /// The test's metrics and closed forms at the current state.
+    /// The test's metrics and closed forms at the current state, reached at `time_s`.
     fn metrics<const D: usize>(
         &self,
         m: &Manifest,
         particles: &Particles<D>,
+        time_s: f64,
         out: &mut BTreeMap<String, f64>,
     );
     /// The summary metric that `runner verify --trend` follows by default.
@@ -107,6 +108,7 @@ experiments! {$
     ColumnCollapse(column_collapse::ColumnCollapse) = "column_collapse",
     LFlow(l_flow::LFlow) = "l_flow",
     Slump(slump::Slump) = "slump",
+    Rodding(rodding::Rodding) = "rodding",
 }
 
 impl SceneSection for SceneSpec {
@@ -241,13 +243,14 @@ fn cell_volume_of(length: f64, dimension: usize) -> f64 {
 pub fn experiment_metrics<const D: usize>(
     m: &Manifest,
     particles: &Particles<D>,
+    time_s: f64,
 ) -> BTreeMap<String, f64> {
     let mut out = BTreeMap::new();
     out.insert(
         "front_position_m".to_string(),
         front_position_m(particles, m.spacing_m),
     );
-    with_experiment!(&m.scene, e => e.metrics(m, particles, &mut out));
+    with_experiment!(&m.scene, e => e.metrics(m, particles, time_s, &mut out));
     let tags = boundaries::tags_in_use(&m.boundaries);
     if !tags.is_empty() {
         let mut counts = vec![0usize; usize::from(*tags.last().expect("not empty")) + 1];

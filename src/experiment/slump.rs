@@ -139,6 +139,7 @@ impl Experiment for Slump {
         &self,
         m: &Manifest,
         particles: &Particles<D>,
+        _time_s: f64,
         out: &mut BTreeMap<String, f64>,
     ) {
         let l0 = m.spacing_m;

@@ -155,7 +155,9 @@ pub fn time_loop<const D: usize>(
     // its value is that of the restored state: replays and resumed runs stop where the run
     // did.
     let mut rest_previous: Option<f64> = match &m.stop.rest_metric {
-        Some(name) if start.restored => Some(experiment_metrics(m, &solver.particles)[name]),
+        Some(name) if start.restored => {
+            Some(experiment_metrics(m, &solver.particles, solver.time_s)[name])
+        }
         _ => None,
     };
 
@@ -173,7 +175,7 @@ pub fn time_loop<const D: usize>(
             sink.checkpoint(time_ns(t), &msg)?;
             last_checkpoint_step = Some(solver.step);
             if let Some(name) = &m.stop.rest_metric {
-                let value = experiment_metrics(m, &solver.particles)[name];
+                let value = experiment_metrics(m, &solver.particles, solver.time_s)[name];
                 let change = rest_previous.map(|previous| (value - previous).abs());
                 rest_previous = Some(value);
                 if let Some(change) = change
@@ -265,7 +267,7 @@ pub fn time_loop<const D: usize>(
     }
 
     let p = &solver.particles;
-    let mut metrics: BTreeMap<String, f64> = experiment_metrics(m, p);
+    let mut metrics: BTreeMap<String, f64> = experiment_metrics(m, p, solver.time_s);
     metrics.insert("particle_count".into(), p.len() as f64);
     metrics.insert("fluid_particle_count".into(), p.fluid_count() as f64);
     metrics.insert(

@@ -1,0 +1,187 @@
+//! The rodding (mixing) test of seed 000 (2D): the layered scene, the rod's strokes, the
+//! share table and mixing index, conservation (no particle lost or out of the form, the rod
+//! never in a wall), and the replay of a coarse run.
+mod common;
+use mps_runner::experiment::rodding::{LAYER_TAGS, SHARE_NAMES, mixing_index};
+use mps_runner::experiment::{SceneSpec, build_scene};
+use mps_runner::mps::ParticleKind;
+use mps_runner::record::read_run;
+
+/// A coarse run: 10 mm (the rod 20 mm: two spacings), three strokes at 0.5 m/s, 0.3 s
+/// settling after them.
+const COARSE: &[&str] = &[
+    "spacing_m=0.01",
+    "scene.rod_width_m=0.02",
+    "scene.strokes=3",
+    "scene.rod_speed_m_s=0.5",
+    "time.end_s=4.5",
+    "output.checkpoint_interval_s=0.25",
+];
+
+fn rodding(
+    resolved: &mps_runner::experiment::Resolved,
+) -> mps_runner::experiment::rodding::Rodding {
+    match &resolved.manifest.scene {
+        SceneSpec::Rodding(r) => r.clone(),
+        other => panic!("{other:?}"),
+    }
+}
+
+#[test]
+fn the_form_holds_three_equal_layers_and_the_rod_waits_above_them() {
+    let resolved = common::resolve("rodding_2d.yaml", &[]);
+    let m = &resolved.manifest;
+    let r = rodding(&resolved);
+    let scene = build_scene::<2>(m);
+    let p = &scene.particles;
+    let l0 = m.spacing_m;
+    // 150 mm x 300 mm at 5 mm: 30 x 60 particles, 20 rows per layer, from the floor up.
+    let fluid: Vec<usize> = (0..p.len())
+        .filter(|&i| p.kind[i] == ParticleKind::Fluid)
+        .collect();
+    assert_eq!(fluid.len(), 30 * 60);
+    for (layer, tag) in LAYER_TAGS.iter().enumerate() {
+        let members: Vec<&usize> = fluid.iter().filter(|&&i| p.tag[i] == *tag).collect();
+        assert_eq!(members.len(), 30 * 20, "layer {layer}");
+        for &&i in &members {
+            let y = p.position_m[i][1];
+            let band = layer as f64 * 0.1;
+            assert!(y > band && y < band + 0.1, "layer {layer} at y = {y}");
+        }
+    }
+    // The bands by rank are the layers: the share table is the identity, mixing index 0.
+    let metrics = mps_runner::experiment::experiment_metrics(m, p, 0.0);
+    for (band, row) in SHARE_NAMES.iter().enumerate() {
+        for (layer, name) in row.iter().enumerate() {
+            assert_eq!(
+                metrics[*name],
+                if band == layer { 1.0 } else { 0.0 },
+                "{name}"
+            );
+        }
+    }
+    assert_eq!(metrics["mixing_index"], 0.0);
+    assert_eq!(metrics["strokes_done"], 0.0);
+    // The rod: one body, 16 mm wide, its tip 20 mm above the fill, clear of the fluid.
+    assert_eq!(scene.bodies.len(), 1);
+    let rod = &scene.bodies[0];
+    let tip = (rod.first..rod.end)
+        .map(|i| p.position_m[i][1])
+        .fold(f64::INFINITY, f64::min);
+    assert!((tip - (0.32 + 0.5 * l0)).abs() < 1e-9, "tip at {tip}");
+    // Stroke k ends after the start, 2k travels of 0.3 m and the moves across between the
+    // positions 37.5, 75, 112.5 mm taken in turn (37.5, 37.5, then 75 mm back).
+    let end_of = |k: usize| {
+        let across: f64 = (1..k)
+            .map(|j| if j % 3 == 0 { 0.075 } else { 0.0375 })
+            .sum();
+        0.2 + across / 0.25 + 2.0 * k as f64 * 0.3 / 0.25
+    };
+    for k in 1..=12 {
+        assert_eq!(r.strokes_done(end_of(k) - 1e-9), k - 1);
+        assert_eq!(r.strokes_done(end_of(k) + 1e-9), k);
+    }
+    assert!((r.last_stroke_end_s() - end_of(12)).abs() < 1e-12);
+}
+
+#[test]
+fn the_mixing_index_is_zero_for_layers_and_one_for_thirds() {
+    let identity = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+    assert_eq!(mixing_index(&identity), 0.0);
+    let third = 1.0 / 3.0;
+    assert!((mixing_index(&[[third; 3]; 3]) - 1.0).abs() < 1e-15);
+    // Half of each band swapped with its neighbour's layer lies in between.
+    let half = [[0.5, 0.5, 0.0], [0.5, 0.0, 0.5], [0.0, 0.5, 0.5]];
+    let h = mixing_index(&half);
+    assert!(h > 0.2 && h < 0.8, "{h}");
+}
+
+/// The coarse run end to end: the rod mixes (the index after each stroke above the one
+/// before), nothing is lost or leaves the form, the rod stays between the walls, and the run
+/// replays bit for bit from the start and from a checkpoint mid-stroke.
+#[test]
+fn strokes_mix_the_layers_and_lose_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let resolved = common::resolve("rodding_2d.yaml", COARSE);
+    let m = &resolved.manifest;
+    let r = rodding(&resolved);
+    let result = common::run_completed(&resolved, dir.path(), 2);
+    let run = read_run(&result.path).unwrap();
+    let fluid = 15 * 30;
+    // Every diagnostics row: all the fluid there, each band's shares adding up to 1.
+    for d in &run.diagnostics {
+        assert_eq!(d.fluid_particle_count, fluid, "t = {}", d.time_s);
+        for (band, row) in SHARE_NAMES.iter().enumerate() {
+            let total: f64 = row.iter().map(|name| d.metrics[*name]).sum();
+            assert!(
+                (total - 1.0).abs() < 1e-12,
+                "band {band} at t = {}: {total}",
+                d.time_s
+            );
+        }
+    }
+    // Every checkpoint: each layer keeps its 150 particles (tags are never lost), the fluid
+    // stays between the form's walls, the rod too.
+    let mut top_m: f64 = 0.0;
+    for s in &run.states {
+        let n = s.kind.len();
+        for tag in LAYER_TAGS {
+            let count = (0..n)
+                .filter(|&i| s.kind[i] == 0 && s.tag[i] == u32::from(tag))
+                .count();
+            assert_eq!(
+                count,
+                fluid as usize / 3,
+                "layer tag {tag} at t = {}",
+                s.time_s
+            );
+        }
+        for i in 0..n {
+            let (x, y) = (s.position_m[2 * i], s.position_m[2 * i + 1]);
+            if s.kind[i] == 0 {
+                top_m = top_m.max(y);
+                assert!(
+                    x > 0.0 && x < r.form_width_m && y > 0.0,
+                    "fluid particle {i} at ({x}, {y}), t = {}",
+                    s.time_s
+                );
+            }
+        }
+    }
+    println!(
+        "highest fluid particle at a checkpoint: {top_m} m; clinging to the rod at the end: {}",
+        run.diagnostics.last().unwrap().metrics["fluid_on_rod_count"]
+    );
+    let scene = build_scene::<2>(m);
+    let rod = &scene.bodies[0];
+    for s in &run.states {
+        for i in rod.first..rod.end {
+            let (x, y) = (s.position_m[2 * i], s.position_m[2 * i + 1]);
+            assert!(
+                x > 0.0 && x < r.form_width_m && y > 0.0,
+                "rod particle {i} at ({x}, {y}), t = {}",
+                s.time_s
+            );
+        }
+    }
+    // The mixing index at the end of each stroke (the first diagnostics row after it) rises.
+    let mut after_strokes = Vec::new();
+    for k in 1..=3 {
+        let row = run
+            .diagnostics
+            .iter()
+            .find(|d| d.metrics["strokes_done"] >= f64::from(k))
+            .unwrap();
+        after_strokes.push(row.metrics["mixing_index"]);
+    }
+    assert!(after_strokes[0] > 0.05, "{after_strokes:?}");
+    assert!(
+        after_strokes.windows(2).all(|w| w[1] > w[0]),
+        "{after_strokes:?}"
+    );
+    let summary = run.summary.unwrap();
+    assert_eq!(summary.metrics["strokes_done"], 3.0);
+    assert_eq!(summary.metrics["ghost_particle_count"], 0.0);
+    common::assert_replays(&result.path, None);
+    common::assert_replays(&result.path, Some(5));
+}
