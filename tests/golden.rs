@@ -47,6 +47,18 @@ const CASES: &[(&str, &[&str], &str)] = &[
         &["time.end_s=0.3"],
         "004caff60a089d3384395443fe23429b5e9cd41da4a1f87e5723dd4a2e39fad8",
     ),
+    // The rodding test (added with it): 10 mm, the rod going down from t = 0, 0.5 s (its
+    // tip 125 mm into the concrete).
+    (
+        "rodding_2d.yaml",
+        &[
+            "spacing_m=0.01",
+            "scene.rod_width_m=0.02",
+            "scene.start_s=0",
+            "time.end_s=0.5",
+        ],
+        "229c50a4c632f01bca87dea98dcf3ae044536f8b3eebf674dc006dcc5b42b09f",
+    ),
 ];
 
 fn final_hash(experiment: &str, sets: &[&str], threads: usize) -> String {

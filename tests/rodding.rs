@@ -6,6 +6,7 @@ use mps_runner::experiment::rodding::{LAYER_TAGS, SHARE_NAMES, mixing_index};
 use mps_runner::experiment::{SceneSpec, build_scene};
 use mps_runner::mps::ParticleKind;
 use mps_runner::record::read_run;
+use mps_runner::report;
 
 /// A coarse run: 10 mm (the rod 20 mm: two spacings), three strokes at 0.5 m/s, 0.3 s
 /// settling after them.
@@ -179,9 +180,91 @@ fn strokes_mix_the_layers_and_lose_nothing() {
         after_strokes.windows(2).all(|w| w[1] > w[0]),
         "{after_strokes:?}"
     );
-    let summary = run.summary.unwrap();
+    let summary = run.summary.as_ref().unwrap();
     assert_eq!(summary.metrics["strokes_done"], 3.0);
     assert_eq!(summary.metrics["ghost_particle_count"], 0.0);
+    // The plot against the stroke count: a point per count, the row just after it.
+    let series = report::diagnostics_series_against(&run, "strokes_done", "mixing_index");
+    let xs: Vec<f64> = series.iter().map(|p| p.0).collect();
+    assert_eq!(xs, [0.0, 1.0, 2.0, 3.0]);
+    assert_eq!(
+        &series[1..].iter().map(|p| p.1).collect::<Vec<_>>(),
+        &after_strokes
+    );
+    let svg = report::plot_run(
+        &result.path,
+        &["mixing_index".into(), SHARE_NAMES[2][2].into()],
+        Some("strokes_done"),
+        None,
+    )
+    .unwrap();
+    assert!(
+        svg.to_string_lossy()
+            .ends_with("-mixing_index-vs-strokes_done.svg")
+    );
+    // A snapshot by layer at a chosen time: the frame nearest it (clouds every 0.1 s).
+    let snap = report::snapshot(&result.path, Some("tag"), false, Some(2.04), None).unwrap();
+    let text = std::fs::read_to_string(&snap).unwrap();
+    assert!(
+        text.contains("at t = 2.0"),
+        "{}",
+        &text[..text.len().min(2000)]
+    );
     common::assert_replays(&result.path, None);
     common::assert_replays(&result.path, Some(5));
+}
+
+/// Bad rodding sections are refused naming the field, with what is allowed.
+#[test]
+fn bad_rodding_sections_are_refused_naming_the_field() {
+    let cases: &[(&[&str], &str)] = &[
+        (
+            &["dimension=3"],
+            "dimension: scene.kind rodding is the 2D test",
+        ),
+        (
+            &["scene.stroke_positions_m.0=0.01"],
+            "scene.stroke_positions_m.0: the rod (0.016 wide) must stay one spacing inside",
+        ),
+        (
+            &["scene.stroke_positions_m.2=0.145"],
+            "scene.stroke_positions_m.2: the rod",
+        ),
+        (
+            &["scene.stroke_bottom_m=0.001"],
+            "scene.stroke_bottom_m: the rod's lowest tip",
+        ),
+        (
+            &["scene.stroke_bottom_m=0.35"],
+            "scene.stroke_bottom_m: the rod's lowest tip",
+        ),
+        (
+            &["scene.fill_height_m=0.5"],
+            "scene.fill_height_m: must be <= scene.form_height_m",
+        ),
+        (
+            &["scene.rod_length_m=0.1"],
+            "scene.rod_length_m: must be at least the stroke",
+        ),
+        (
+            &["scene.rod_speed_m_s=2"],
+            "scene.rod_speed_m_s: must be <= time.courant",
+        ),
+        (&["scene.strokes=0"], "scene.strokes"),
+        (
+            &["scene.rod_width_m=0.005"],
+            "scene.rod_width_m: must be >= 2 * spacing_m",
+        ),
+        (&["scene.start_s=-1"], "scene.start_s"),
+    ];
+    let mut failures = Vec::new();
+    for (sets, fragment) in cases {
+        let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
+        match mps_runner::experiment::load(&common::experiment("rodding_2d.yaml"), &sets) {
+            Ok(_) => failures.push(format!("{sets:?}: accepted")),
+            Err(e) if !e.to_string().contains(fragment) => failures.push(format!("{sets:?}: {e}")),
+            Err(_) => {}
+        }
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
 }

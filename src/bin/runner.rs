@@ -106,14 +106,19 @@ enum Command {
         #[arg(long, short)]
         quiet: bool,
     },
-    /// Plot a diagnostics quantity of one run against simulated time (SVG).
+    /// Plot diagnostics quantities of one run against simulated time, or against another
+    /// quantity (SVG).
     Plot {
         run: PathBuf,
         /// `Diagnostics.metrics` key or built-in field such as kinetic_energy_j (default:
-        /// the first metric).
+        /// the first metric); repeat for several lines.
         #[arg(long)]
-        metric: Option<String>,
-        /// Output file (default: <run>-<metric>.svg beside the run).
+        metric: Vec<String>,
+        /// Quantity for the x axis (default time_s); another one, e.g. strokes_done, gives a
+        /// point per value it takes, from the first diagnostics row that has it.
+        #[arg(long)]
+        x: Option<String>,
+        /// Output file (default: <run>-<metric>[-vs-<x>].svg beside the run).
         #[arg(long)]
         out: Option<PathBuf>,
     },
@@ -142,7 +147,10 @@ enum Command {
         /// 3D runs: view from above, fluid only (default: from the side, x-z, with walls).
         #[arg(long)]
         top: bool,
-        /// Output file (default: <run>-snapshot-<field>.svg beside the run).
+        /// The frame nearest this simulated time (default: the last frame).
+        #[arg(long, value_name = "SECONDS")]
+        time: Option<f64>,
+        /// Output file (default: <run>-snapshot-<field>[-t<time>].svg beside the run).
         #[arg(long)]
         out: Option<PathBuf>,
     },
@@ -252,11 +260,21 @@ fn main() -> ExitCode {
             threads,
             quiet,
         }) => resume_command(&file, threads, quiet),
-        Some(Command::Plot { run, metric, out }) => {
+        Some(Command::Plot {
+            run,
+            metric,
+            x,
+            out,
+        }) => {
             if let Err(code) = readable_run(&run) {
                 return code;
             }
-            report_result(report::plot_run(&run, metric.as_deref(), out.as_deref()))
+            report_result(report::plot_run(
+                &run,
+                &metric,
+                x.as_deref(),
+                out.as_deref(),
+            ))
         }
         Some(Command::PlotSweep {
             dir,
@@ -276,6 +294,7 @@ fn main() -> ExitCode {
             run,
             field,
             top,
+            time,
             out,
         }) => {
             if let Err(code) = readable_run(&run) {
@@ -285,6 +304,7 @@ fn main() -> ExitCode {
                 &run,
                 field.as_deref(),
                 top,
+                time,
                 out.as_deref(),
             ))
         }

@@ -161,36 +161,82 @@ fn read(path: &Path) -> Result<RunFile> {
     Ok(read_run(path)?)
 }
 
-/// `runner plot`: diagnostics quantity `metric` (default [`default_metric`]) against
-/// simulated time. Default output: `<run>-<metric>.svg` beside the run file.
-pub fn plot_run(mcap: &Path, metric: Option<&str>, out: Option<&Path>) -> Result<PathBuf> {
-    let run = read(mcap)?;
-    let metric = metric.map_or_else(|| default_metric(&run), str::to_string);
-    let points = diagnostics_series(&run, &metric);
-    if points.is_empty() {
-        let mut known: Vec<String> = DIAGNOSTICS_FIELDS.iter().map(|s| s.to_string()).collect();
-        if let Some(d) = run.diagnostics.first() {
-            known.extend(d.metrics.keys().cloned());
-        }
-        return Err(ReportError::Input(format!(
-            "{}: no diagnostics value `{metric}`; known: {}",
-            mcap.display(),
-            known.join(", ")
-        )));
+/// `(x, value)` of diagnostics quantity `name` against quantity `x`: with `time_s`, every
+/// row; otherwise one point per value `x` takes, from the first row that has it (for a
+/// counter such as `strokes_done`: the state just after each count is reached).
+pub fn diagnostics_series_against(run: &RunFile, x: &str, name: &str) -> Vec<(f64, f64)> {
+    if x == "time_s" {
+        return diagnostics_series(run, name);
     }
+    let mut points: Vec<(f64, f64)> = Vec::new();
+    for d in &run.diagnostics {
+        if let (Some(xv), Some(v)) = (diagnostics_value(d, x), diagnostics_value(d, name))
+            && !points.iter().any(|p| p.0 == xv)
+        {
+            points.push((xv, v));
+        }
+    }
+    points
+}
+
+/// `runner plot`: diagnostics quantities `metrics` (default [`default_metric`]), one line
+/// each, against simulated time or quantity `x` (see [`diagnostics_series_against`]).
+/// Default output: `<run>-<first metric>[-vs-<x>].svg` beside the run file.
+pub fn plot_run(
+    mcap: &Path,
+    metrics: &[String],
+    x: Option<&str>,
+    out: Option<&Path>,
+) -> Result<PathBuf> {
+    let run = read(mcap)?;
+    let metrics = if metrics.is_empty() {
+        vec![default_metric(&run)]
+    } else {
+        metrics.to_vec()
+    };
+    let x = x.unwrap_or("time_s");
+    let mut series = Vec::new();
+    for name in std::iter::once(x).chain(metrics.iter().map(String::as_str)) {
+        let points = diagnostics_series_against(&run, "time_s", name);
+        if points.is_empty() {
+            let mut known: Vec<String> = DIAGNOSTICS_FIELDS.iter().map(|s| s.to_string()).collect();
+            if let Some(d) = run.diagnostics.first() {
+                known.extend(d.metrics.keys().cloned());
+            }
+            return Err(ReportError::Input(format!(
+                "{}: no diagnostics value `{name}`; known: {}",
+                mcap.display(),
+                known.join(", ")
+            )));
+        }
+    }
+    for name in &metrics {
+        series.push(Series {
+            label: name.clone(),
+            points: diagnostics_series_against(&run, x, name),
+        });
+    }
+    let first = &metrics[0];
+    let suffix = if x == "time_s" {
+        String::new()
+    } else {
+        format!("-vs-{}", slug(x))
+    };
     let out = out.map_or_else(
-        || beside(mcap, &format!("-{}.svg", slug(&metric))),
+        || beside(mcap, &format!("-{}{suffix}.svg", slug(first))),
         Path::to_path_buf,
     );
+    let y_label = if metrics.len() == 1 {
+        axis_label(first)
+    } else {
+        metrics.join(", ")
+    };
     plot::line_plot(
         &out,
-        &format!("{}: {metric}", run_title(&run)),
-        &axis_label("time_s"),
-        &axis_label(&metric),
-        &[Series {
-            label: metric.clone(),
-            points,
-        }],
+        &format!("{}: {}", run_title(&run), metrics.join(", ")),
+        &axis_label(x),
+        &y_label,
+        &series,
         false,
     )?;
     Ok(out)
@@ -348,16 +394,35 @@ pub fn default_sweep_metrics(metrics: &BTreeMap<String, f64>) -> Vec<String> {
         .collect()
 }
 
-/// `runner snapshot`: the last `/particles` frame of a run, coloured by `field` (default
-/// `kind`). Default output: `<run>-snapshot-<field>.svg` beside the run file.
+/// `runner snapshot`: the last `/particles` frame of a run, or the one nearest `time_s`,
+/// coloured by `field` (default `kind`). Default output:
+/// `<run>-snapshot-<field>[-t<time>].svg` beside the run file.
 pub fn snapshot(
     mcap: &Path,
     field: Option<&str>,
     top: bool,
+    time_s: Option<f64>,
     out: Option<&Path>,
 ) -> Result<PathBuf> {
     let run = read(mcap)?;
-    let Some(pc) = run.last_cloud.as_ref() else {
+    let chosen = match time_s {
+        None => run.last_cloud.clone(),
+        Some(t) => {
+            let clouds =
+                crate::record::read_messages(mcap)?
+                    .into_iter()
+                    .filter_map(|(log_ns, m)| match m {
+                        crate::record::Logged::Cloud(c) => Some((log_ns, c)),
+                        _ => None,
+                    });
+            // The frame nearest t (the earlier one on a tie).
+            let target_ns = crate::run::time_ns(t.max(0.0));
+            clouds
+                .min_by_key(|(log_ns, _)| log_ns.abs_diff(target_ns))
+                .map(|(_, c)| c)
+        }
+    };
+    let Some(pc) = chosen.as_ref() else {
         return Err(ReportError::Input(format!(
             "{}: no /particles frame",
             mcap.display()
@@ -395,14 +460,19 @@ pub fn snapshot(
         (false, _) => plot::View::Plane,
     };
     let suffix = if view == plot::View::Top { "-top" } else { "" };
-    let out = out.map_or_else(
-        || beside(mcap, &format!("-snapshot{suffix}-{}.svg", slug(field))),
-        Path::to_path_buf,
-    );
     let time = pc
         .timestamp
         .as_ref()
         .map_or(0.0, |t| t.seconds as f64 + f64::from(t.nanos) * 1e-9);
+    let at = if time_s.is_some() {
+        format!("-t{}", slug(&format!("{time:.2}")))
+    } else {
+        String::new()
+    };
+    let out = out.map_or_else(
+        || beside(mcap, &format!("-snapshot{suffix}-{}{at}.svg", slug(field))),
+        Path::to_path_buf,
+    );
     let title = format!("{} at t = {time} s: {field}", run_title(&run));
     plot::snapshot_plot(&out, &title, &frame, field, view)?;
     Ok(out)
