@@ -8,15 +8,14 @@ use mps_runner::mps::ParticleKind;
 use mps_runner::record::read_run;
 use mps_runner::report;
 
-/// A coarse run: 10 mm (the rod 20 mm: two spacings), three strokes at 0.5 m/s, 0.3 s
-/// settling after them.
+/// A coarse run: 10 mm (the rod 20 mm: two spacings), three strokes at the default speed,
+/// 0.3 s settling after them.
 const COARSE: &[&str] = &[
     "spacing_m=0.01",
     "scene.rod_width_m=0.02",
     "scene.strokes=3",
-    "scene.rod_speed_m_s=0.5",
-    "time.end_s=4.5",
-    "output.checkpoint_interval_s=0.25",
+    "time.end_s=8.1",
+    "output.checkpoint_interval_s=0.5",
 ];
 
 fn rodding(
@@ -70,19 +69,19 @@ fn the_form_holds_three_equal_layers_and_the_rod_waits_above_them() {
         .map(|i| p.position_m[i][1])
         .fold(f64::INFINITY, f64::min);
     assert!((tip - (0.32 + 0.5 * l0)).abs() < 1e-9, "tip at {tip}");
-    // Stroke k ends after the start, 2k travels of 0.3 m and the moves across between the
+    // Stroke k ends after the start, 2k travels of 0.31 m and the moves across between the
     // positions 37.5, 75, 112.5 mm taken in turn (37.5, 37.5, then 75 mm back).
     let end_of = |k: usize| {
         let across: f64 = (1..k)
             .map(|j| if j % 3 == 0 { 0.075 } else { 0.0375 })
             .sum();
-        0.2 + across / 0.25 + 2.0 * k as f64 * 0.3 / 0.25
+        0.2 + across / 0.25 + 2.0 * k as f64 * 0.31 / 0.25
     };
-    for k in 1..=12 {
+    for k in 1..=24 {
         assert_eq!(r.strokes_done(end_of(k) - 1e-9), k - 1);
         assert_eq!(r.strokes_done(end_of(k) + 1e-9), k);
     }
-    assert!((r.last_stroke_end_s() - end_of(12)).abs() < 1e-12);
+    assert!((r.last_stroke_end_s() - end_of(24)).abs() < 1e-12);
 }
 
 #[test]
@@ -139,10 +138,13 @@ fn strokes_mix_the_layers_and_lose_nothing() {
         }
         for i in 0..n {
             let (x, y) = (s.position_m[2 * i], s.position_m[2 * i + 1]);
+            // Inside the form: short of the centres of its first wall layer (half a
+            // spacing beyond its inner surface, where the collision model stops fluid).
+            let l0 = m.spacing_m;
             if s.kind[i] == 0 {
                 top_m = top_m.max(y);
                 assert!(
-                    x > 0.0 && x < r.form_width_m && y > 0.0,
+                    x > -0.5 * l0 && x < r.form_width_m + 0.5 * l0 && y > -0.5 * l0,
                     "fluid particle {i} at ({x}, {y}), t = {}",
                     s.time_s
                 );
@@ -204,6 +206,7 @@ fn strokes_mix_the_layers_and_lose_nothing() {
     );
     // A snapshot by layer at a chosen time: the frame nearest it (clouds every 0.1 s).
     let snap = report::snapshot(&result.path, Some("tag"), false, Some(2.04), None).unwrap();
+    // (clouds every 0.1 s)
     let text = std::fs::read_to_string(&snap).unwrap();
     assert!(
         text.contains("at t = 2.0"),
