@@ -102,7 +102,7 @@ const CASES: &[(&[&str], &str)] = &[
     (&["--set", "nope.key=1"], "unknown key `nope`"),
     (
         &["--set", "boundaries.inlets.0.volume_m3=1"],
-        "is a list of 0 items",
+        "is a list of 0 items: it is empty, so no item can be set",
     ),
     (&["--set", "spacing_m"], "KEY=VALUE"),
     (&["--threads", "0"], "must be at least 1"),

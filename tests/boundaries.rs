@@ -198,7 +198,10 @@ fn bad_boundaries_are_refused_naming_the_field() {
             "boundaries.bodies.0.repeat_s",
         ),
         ("boundaries.tags.0.tag=70000", "boundaries.tags.0.tag"),
-        ("boundaries.inlets.1.tag=1", "is a list of 1 items"),
+        (
+            "boundaries.inlets.1.tag=1",
+            "is a list of 1 item: `1` is not an index; the only one is 0",
+        ),
     ];
     let text = std::fs::read_to_string(common::experiment("pour_2d.yaml")).unwrap();
     for (set, fragment) in cases {

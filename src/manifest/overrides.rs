@@ -117,13 +117,18 @@ pub fn apply<S: SceneSection>(root: &mut Value, raw: &str, touched: &mut Touched
             };
             let n = items.len();
             let Some(index) = seg.parse::<usize>().ok().filter(|&k| k < n) else {
-                return Err(err(
-                    key,
-                    format!(
-                        "`{here}` is a list of {n} items: `{seg}` is not an index 0 to {}",
-                        n.saturating_sub(1)
-                    ),
-                ));
+                let allowed = match n {
+                    0 => "it is empty, so no item can be set (add the item in the manifest)"
+                        .to_string(),
+                    1 => format!("`{seg}` is not an index; the only one is 0"),
+                    _ => format!("`{seg}` is not an index 0 to {}", n - 1),
+                };
+                let size = if n == 1 {
+                    "1 item".to_string()
+                } else {
+                    format!("{n} items")
+                };
+                return Err(err(key, format!("`{here}` is a list of {size}: {allowed}")));
             };
             let child_path = format!("{here}.{seg}");
             if last {
