@@ -24,6 +24,10 @@ pub enum RecordError {
     },
     #[error("{}: not a valid run file: {reason}", path.display())]
     Invalid { path: PathBuf, reason: String },
+    /// A finished file (it ends with the MCAP footer) that is not whole: the reason names the
+    /// first damaged part and its byte offset.
+    #[error("{}: damaged: {reason}", path.display())]
+    Damaged { path: PathBuf, reason: String },
 }
 
 pub type Result<T, E = RecordError> = std::result::Result<T, E>;
