@@ -291,3 +291,31 @@ fn a_killed_run_with_a_corrupt_late_chunk_resumes_from_the_last_intact_checkpoin
     assert_eq!(code, Some(0), "{stderr}");
     common::assert_replays(&resumed_path, None);
 }
+
+#[test]
+fn an_attachment_too_short_for_its_crc_is_damage_not_a_panic() {
+    // The mcap crate slices an attachment body by its data length and takes the last 4 bytes
+    // as its CRC without checking that they follow the data (it panics on this record).
+    let dir = tempfile::tempdir().unwrap();
+    let whole = std::fs::read(smoke(dir.path())).unwrap();
+    let (at, _) = first(&whole, 0x09);
+    let mut body = Vec::new();
+    body.extend_from_slice(&[0u8; 16]); // log and create times
+    body.extend_from_slice(&0u32.to_le_bytes()); // name ""
+    body.extend_from_slice(&0u32.to_le_bytes()); // media type ""
+    body.extend_from_slice(&0u64.to_le_bytes()); // data length 0, then no CRC
+    let mut bytes = whole[..at].to_vec();
+    bytes.push(0x09);
+    bytes.extend_from_slice(&(body.len() as u64).to_le_bytes());
+    bytes.extend_from_slice(&body);
+    let partial = dir.path().join("short.mcap.partial");
+    std::fs::write(&partial, &bytes).unwrap();
+    let run = read_run(&partial).unwrap();
+    let stop = run.stop.unwrap();
+    assert!(stop.damaged, "{stop}");
+    assert_eq!(stop.at_byte, at as u64);
+    assert!(
+        stop.reason.contains("attachment record") && stop.reason.contains("shorter"),
+        "{stop}"
+    );
+}

@@ -820,7 +820,12 @@ fn attachment_layout(body: &[u8]) -> std::result::Result<(), String> {
         .ok_or_else(short)?;
     if needed != body.len() as u64 {
         return Err(format!(
-            "its fields take {needed} bytes, the record has {}",
+            "it is {} than its fields say (they take {needed} bytes, it has {})",
+            if needed > body.len() as u64 {
+                "shorter"
+            } else {
+                "longer"
+            },
             body.len()
         ));
     }
