@@ -1,7 +1,7 @@
 //! `runner`: the command line. Parses arguments, calls the library, and is the only place
-//! that turns results into exit codes: 0 success, 1 internal or I/O error, 2 bad input (CLI or
-//! manifest), 3 simulation failed, 130 interrupted. `runner verify`: 0 identical, 1 not, 2 the
-//! file cannot be used.
+//! that turns results into exit codes: 0 success, 1 internal or I/O error, 2 bad input (CLI,
+//! manifest, or a run file that is unreadable, incomplete or damaged), 3 simulation failed,
+//! 130 interrupted. `runner verify`: 0 identical, 1 not, 2 the file cannot be used.
 use clap::{Parser, Subcommand};
 use mps_runner::experiment;
 use mps_runner::manifest::sweep;
