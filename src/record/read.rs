@@ -229,6 +229,7 @@ fn damaged(at_byte: usize, reason: String) -> Problem {
 
 /// Walker state: the channels and sequences seen so far, and what the summary section must
 /// agree with.
+#[derive(Default)]
 struct Walker {
     channels: BTreeMap<u16, ChannelInfo>,
     /// Next expected sequence number per channel (the recorder numbers each from 0).
@@ -264,17 +265,7 @@ fn walk(path: &Path, mut on_message: impl FnMut(u64, Logged)) -> Result<Walked> 
     let finished = buf.len() >= MAGIC.len() + FOOTER_RECORD_BYTES + MAGIC.len()
         && buf.ends_with(MAGIC)
         && buf[buf.len() - MAGIC.len() - FOOTER_RECORD_BYTES] == op::FOOTER;
-    let mut walker = Walker {
-        channels: BTreeMap::new(),
-        next_sequence: BTreeMap::new(),
-        decoded: BTreeMap::new(),
-        messages: 0,
-        summaries: 0,
-        chunks: Vec::new(),
-        metadata_records: Vec::new(),
-        attachments: Vec::new(),
-        metadata: BTreeMap::new(),
-    };
+    let mut walker = Walker::default();
     // The header comes first in every file, finished or not; without it nothing is usable.
     let header_end = match frame(&buf, MAGIC.len()) {
         Ok(Some(f)) if f.opcode == op::HEADER => {
