@@ -112,6 +112,15 @@ const CASES: &[(&[&str], &str)] = &[
         "more than --max-particles = 100",
     ),
     (&["--threads", "x"], "expected a whole number of threads"),
+    // Both aborted allocating the walls or the lattice before they were refused.
+    (
+        &["--set", "mps.wall_layers=100000"],
+        "mps.wall_layers: must be <= 10",
+    ),
+    (
+        &["--set", "spacing_m=1e-12"],
+        "scene.tank_width_m: must be <= 2^24 * spacing_m",
+    ),
 ];
 
 #[test]
@@ -145,6 +154,42 @@ fn each_bad_input_is_refused_naming_the_field_with_exit_2_and_no_file() {
         }
     }
     assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
+
+#[test]
+fn scenes_too_large_to_build_are_refused_before_anything_is_built() {
+    // Each aborted or exhausted the memory (an OOM kill) before it was refused: the pour's
+    // validation built its whole scene to find the domain box, the huge cone's size estimate
+    // built a first coarse scene of 1e15 particles.
+    let cases: [(&str, &[&str], &str); 2] = [
+        (
+            "pour_2d.yaml",
+            &["spacing_m=1e-5", "time.dt_max_s=1e-8"],
+            "the run would hold about 2.4",
+        ),
+        (
+            "slump_3d.yaml",
+            &["scene.cone_height_m=18446744073709551616"],
+            "scene.cone_height_m: must be <= 2^24 * spacing_m",
+        ),
+    ];
+    for (experiment, sets, fragment) in cases {
+        let out = tempfile::tempdir().unwrap();
+        let mut command = Command::cargo_bin("runner").unwrap();
+        command
+            .arg(common::experiment(experiment))
+            .arg("--out")
+            .arg(out.path())
+            .timeout(std::time::Duration::from_secs(60));
+        for set in sets {
+            command.args(["--set", set]);
+        }
+        let result = command.output().unwrap();
+        let stderr = String::from_utf8_lossy(&result.stderr);
+        assert_eq!(result.status.code(), Some(2), "{experiment}: {stderr}");
+        assert!(stderr.contains(fragment), "{experiment}: {stderr}");
+        assert_eq!(std::fs::read_dir(out.path()).unwrap().count(), 0);
+    }
 }
 
 #[test]

@@ -166,7 +166,7 @@ fn round_trip_of_a_finished_run() {
 
     let run = read_run(&path).unwrap();
     assert!(run.complete);
-    assert_eq!(run.tail_error, None);
+    assert_eq!(run.stop, None);
     assert_eq!(run.states, w.states);
     assert_eq!(run.diagnostics, w.diagnostics);
     assert_eq!(run.clouds, w.clouds);
@@ -385,7 +385,7 @@ fn dropped_recorder_leaves_an_unfinished_partial_with_all_messages() {
     assert!(!path.exists());
     let run = read_run(&partial_path(&path)).unwrap();
     assert!(!run.complete);
-    assert_eq!(run.tail_error, None);
+    assert_eq!(run.stop, None);
     assert_eq!(run.states, w.states);
     assert_eq!(run.diagnostics.len(), w.diagnostics.len() + 1);
     assert_eq!(run.summary, None);
@@ -419,14 +419,17 @@ fn truncated_tail_is_skipped_and_complete_chunks_recovered() {
         fs::write(&cut, &full[..mid as usize]).unwrap();
         let run = read_run(&cut).unwrap();
         assert!(!run.complete);
-        assert!(run.tail_error.is_some(), "cut at {mid}");
+        // Cut short, as a killed run leaves it: not damaged, and placed at the chunk's start.
+        let stop = run.stop.as_ref().unwrap_or_else(|| panic!("cut at {mid}"));
+        assert!(!stop.damaged, "cut at {mid}: {stop}");
+        assert_eq!(stop.at_byte, sizes[k], "cut at {mid}: {stop}");
         assert_eq!(run.states, states[..=k], "cut at {mid}");
         assert_eq!(run.clouds, k + 1);
     }
     // Cut exactly at a flush point: a clean record boundary.
     fs::write(&cut, &full[..sizes[1] as usize]).unwrap();
     let run = read_run(&cut).unwrap();
-    assert_eq!((run.complete, run.tail_error.as_deref()), (false, None));
+    assert_eq!((run.complete, run.stop.as_ref()), (false, None));
     assert_eq!(run.states, states[..2]);
     // A file that lost only its last byte has lost its footer.
     fs::write(&cut, &full[..full.len() - 1]).unwrap();
@@ -434,6 +437,8 @@ fn truncated_tail_is_skipped_and_complete_chunks_recovered() {
     assert!(!run.complete);
     assert_eq!(run.states, states);
     assert!(run.summary.is_some());
+    let stop = run.stop.unwrap();
+    assert!(!stop.damaged && stop.reason.contains("end magic"), "{stop}");
 }
 
 #[test]
@@ -447,7 +452,10 @@ fn corrupt_complete_file_is_an_error() {
     let i = (chunk.chunk_start_offset + chunk.chunk_length - chunk.compressed_size / 2) as usize;
     bytes[i] ^= 0x55;
     fs::write(&path, &bytes).unwrap();
-    assert!(read_run(&path).is_err());
+    // Named with the chunk's offset (it fails its CRC or cannot be decompressed).
+    let message = read_run(&path).unwrap_err().to_string();
+    let named = format!("damaged: the chunk at byte {} ", chunk.chunk_start_offset);
+    assert!(message.contains(&named), "{message}");
 }
 
 #[test]

@@ -1,7 +1,7 @@
 //! `runner`: the command line. Parses arguments, calls the library, and is the only place
-//! that turns results into exit codes: 0 success, 1 internal or I/O error, 2 bad input (CLI or
-//! manifest), 3 simulation failed, 130 interrupted. `runner verify`: 0 identical, 1 not, 2 the
-//! file cannot be used.
+//! that turns results into exit codes: 0 success, 1 internal or I/O error, 2 bad input (CLI,
+//! manifest, or a run file that is unreadable, incomplete or damaged), 3 simulation failed,
+//! 130 interrupted. `runner verify`: 0 identical, 1 not, 2 the file cannot be used.
 use clap::{Parser, Subcommand};
 use mps_runner::experiment;
 use mps_runner::manifest::sweep;
@@ -321,34 +321,61 @@ fn main() -> ExitCode {
     }
 }
 
-/// Why a file named as a finished run (not `.partial`) is not one: it lacks the closing
-/// magic bytes of an MCAP file, so it was cut short or damaged after it was written. Reading
-/// the last 8 bytes is enough to tell; a `.partial` file (a run in progress or killed) is
-/// expected to lack them.
-fn damaged_run(path: &std::path::Path) -> Option<String> {
-    use std::io::{Read, Seek, SeekFrom};
-    if path.to_string_lossy().ends_with(".partial") {
-        return None;
-    }
-    let mut end = [0u8; 8];
-    let intact = std::fs::File::open(path)
-        .is_ok_and(|mut f| f.seek(SeekFrom::End(-8)).is_ok() && f.read_exact(&mut end).is_ok())
-        && &end == b"\x89MCAP0\r\n";
-    (!intact && path.exists()).then(|| {
-        format!(
-            "{} is incomplete: it does not end with the MCAP footer and magic that a finished run writes (cut short or damaged after it was written; a run in progress or killed is named .partial)",
-            path.display()
-        )
-    })
+/// What a run file's structure lets verify, resume, plot, snapshot and profile do with it
+/// (see `record::read`: the reader that checks it is the one they read with).
+enum FileState {
+    /// Finished and whole, or a `.partial` that ends as a killed run leaves it (on a record
+    /// boundary or in a chunk cut short).
+    Usable,
+    /// A `.partial` damaged before its end: it is read up to its last intact chunk. The text
+    /// says where and what is lost.
+    PartialDamaged(String),
+    /// Named as finished (not `.partial`) but without the footer and end magic a finished run
+    /// writes: cut short or damaged after it was written.
+    Incomplete(String),
+    /// Cannot be read as a run: not a run file, missing, or finished but damaged.
+    Unusable(String),
 }
 
-/// For the commands that present a file's contents (plot, snapshot, profile): a damaged
-/// finished file is refused (exit 2) rather than drawn from half of it; a `.partial` file is
-/// drawn with a warning.
+fn file_state(path: &std::path::Path) -> FileState {
+    let check = match mps_runner::record::check_run(path) {
+        Ok(c) => c,
+        Err(e) => return FileState::Unusable(e.to_string()),
+    };
+    if check.complete {
+        return FileState::Usable;
+    }
+    let n = check.checkpoints;
+    if !path.to_string_lossy().ends_with(".partial") {
+        let held = match &check.stop {
+            Some(stop) => format!("{stop} ({n} checkpoints before it)"),
+            None => format!("it ends on a record boundary after {n} checkpoints"),
+        };
+        return FileState::Incomplete(format!(
+            "{} is incomplete: it does not end with the MCAP footer and magic that a finished run writes (cut short or damaged after it was written; a run in progress or killed is named .partial); {held}",
+            path.display()
+        ));
+    }
+    match check.stop.filter(|s| s.damaged) {
+        Some(stop) => FileState::PartialDamaged(format!(
+            "{} is damaged: {stop}; it is read up to the last intact chunk before that ({n} checkpoints), and no further",
+            path.display()
+        )),
+        None => FileState::Usable,
+    }
+}
+
+/// For the commands that present a file's contents (plot, snapshot, profile): an incomplete
+/// or damaged finished file is refused (exit 2) rather than drawn from part of it; a
+/// `.partial` file is drawn with a warning (and another where it is damaged).
 fn readable_run(path: &std::path::Path) -> Result<(), ExitCode> {
-    if let Some(why) = damaged_run(path) {
-        eprintln!("error: {why}");
-        return Err(ExitCode::from(EXIT_BAD_INPUT));
+    match file_state(path) {
+        FileState::Incomplete(why) | FileState::Unusable(why) => {
+            eprintln!("error: {why}");
+            return Err(ExitCode::from(EXIT_BAD_INPUT));
+        }
+        FileState::PartialDamaged(why) => eprintln!("warning: {why}"),
+        FileState::Usable => {}
     }
     if path.to_string_lossy().ends_with(".partial") {
         eprintln!(
@@ -415,6 +442,19 @@ fn verify_command(args: VerifyArgs) -> ExitCode {
         };
     }
     let file = args.file.expect("clap requires FILE without --trend");
+    // An incomplete file still has its checkpoints replayed, but is not called verified.
+    let incomplete = match file_state(&file) {
+        FileState::Unusable(why) => {
+            eprintln!("error: {why}");
+            return ExitCode::from(EXIT_BAD_INPUT);
+        }
+        FileState::Incomplete(why) => Some(why),
+        FileState::PartialDamaged(why) => {
+            eprintln!("warning: {why}");
+            None
+        }
+        FileState::Usable => None,
+    };
     let options = VerifyOptions {
         from: args.from,
         to: args.to,
@@ -432,7 +472,7 @@ fn verify_command(args: VerifyArgs) -> ExitCode {
                     println!("{} {} {:e} {}", h.index, h.step, h.time_s, h.state_sha256);
                 }
             }
-            if let Some(why) = damaged_run(&file) {
+            if let Some(why) = incomplete {
                 // The checkpoints it still holds were replayed, but it is not the whole run.
                 eprintln!("error: {why}");
                 ExitCode::from(EXIT_BAD_INPUT)
@@ -450,15 +490,25 @@ fn verify_command(args: VerifyArgs) -> ExitCode {
 }
 
 fn resume_command(file: &std::path::Path, threads: Option<usize>, quiet: bool) -> ExitCode {
-    if let Some(why) = damaged_run(file) {
-        eprintln!(
-            "error: cannot resume: {why}; a killed run's .partial file resumes, a damaged finished one does not"
-        );
-        return ExitCode::from(EXIT_BAD_INPUT);
-    }
     if threads == Some(0) {
         eprintln!("error: --threads must be at least 1");
         return ExitCode::from(EXIT_BAD_INPUT);
+    }
+    match file_state(file) {
+        FileState::Incomplete(why) => {
+            eprintln!(
+                "error: cannot resume: {why}; a killed run's .partial file resumes, a damaged finished one does not"
+            );
+            return ExitCode::from(EXIT_BAD_INPUT);
+        }
+        FileState::Unusable(why) => {
+            eprintln!("error: cannot resume: {why}");
+            return ExitCode::from(EXIT_BAD_INPUT);
+        }
+        FileState::PartialDamaged(why) => {
+            eprintln!("warning: {why}; resuming from the last of those checkpoints");
+        }
+        FileState::Usable => {}
     }
     let options = ResumeOptions {
         threads,

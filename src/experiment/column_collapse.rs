@@ -6,7 +6,7 @@
 use super::dam_break::{DamBreak, check_tank};
 use super::{Experiment, Manifest, Scene, yield_stress_pa};
 use crate::manifest::validate::Checker;
-use crate::mps::{ParticleKind, Particles};
+use crate::mps::{ParticleKind, Particles, Vector};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
@@ -30,6 +30,9 @@ impl Experiment for ColumnCollapse {
     }
     fn build<const D: usize>(&self, m: &Manifest) -> Scene<D> {
         self.tank.build::<D>(m)
+    }
+    fn domain<const D: usize>(&self, m: &Manifest) -> (Vector<D>, Vector<D>) {
+        self.tank.domain::<D>(m)
     }
     fn metric_names(&self, _m: &Manifest) -> Vec<&'static str> {
         vec!["heap_length_m", "closed_form_heap_length_m"]

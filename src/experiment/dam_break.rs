@@ -45,6 +45,9 @@ impl Experiment for DamBreak {
     fn build<const D: usize>(&self, m: &Manifest) -> Scene<D> {
         build::<D>(self, m.spacing_m, m.mps.wall_layers, m.mps.dummy_layers)
     }
+    fn domain<const D: usize>(&self, m: &Manifest) -> (Vector<D>, Vector<D>) {
+        domain::<D>(self, m.spacing_m)
+    }
     fn metric_names(&self, _m: &Manifest) -> Vec<&'static str> {
         Vec::new()
     }
@@ -108,7 +111,7 @@ pub fn check_tank(p: &DamBreak, m: &Manifest, c: &mut Checker) {
             .into_iter()
             .filter(|(field, _)| *field != "scene.tank_depth_m" || m.dimension == 3)
             .collect();
-        c.two_spacings(&used, m.spacing_m);
+        c.lattice_lengths(&used, m.spacing_m);
     }
 }
 
@@ -117,19 +120,31 @@ fn horizontal(a: usize, width_m: f64, depth_m: f64) -> f64 {
     if a == 0 { width_m } else { depth_m }
 }
 
+/// The tank in lattice cells along each axis.
+fn tank_cells<const D: usize>(p: &DamBreak, spacing_m: f64) -> [i64; D] {
+    std::array::from_fn(|a| {
+        if a == D - 1 {
+            cells(p.tank_height_m, spacing_m)
+        } else {
+            cells(horizontal(a, p.tank_width_m, p.tank_depth_m), spacing_m)
+        }
+    })
+}
+
+/// Fluid may splash over the walls; beyond one tank size away it becomes a ghost.
+pub fn domain<const D: usize>(p: &DamBreak, spacing_m: f64) -> (Vector<D>, Vector<D>) {
+    let tank = tank_cells::<D>(p, spacing_m);
+    let extent = Vector::<D>::from_fn(|a, _| tank[a] as f64 * spacing_m);
+    (-extent, extent * 2.0)
+}
+
 pub fn build<const D: usize>(
     p: &DamBreak,
     spacing_m: f64,
     wall_layers: u32,
     dummy_layers: u32,
 ) -> Scene<D> {
-    let tank: [i64; D] = std::array::from_fn(|a| {
-        if a == D - 1 {
-            cells(p.tank_height_m, spacing_m)
-        } else {
-            cells(horizontal(a, p.tank_width_m, p.tank_depth_m), spacing_m)
-        }
-    });
+    let tank = tank_cells::<D>(p, spacing_m);
     let column: [i64; D] = std::array::from_fn(|a| {
         if a == D - 1 {
             cells(p.column_height_m, spacing_m)
@@ -149,12 +164,11 @@ pub fn build<const D: usize>(
         wall_layers,
         dummy_layers,
     );
-    // Fluid may splash over the walls; beyond one tank size away it becomes a ghost.
-    let extent = Vector::<D>::from_fn(|a, _| tank[a] as f64 * spacing_m);
+    let (domain_min_m, domain_max_m) = domain::<D>(p, spacing_m);
     Scene {
         particles,
-        domain_min_m: -extent,
-        domain_max_m: extent * 2.0,
+        domain_min_m,
+        domain_max_m,
         bodies: Vec::new(),
         inlets: Vec::new(),
     }

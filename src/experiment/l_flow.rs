@@ -78,11 +78,15 @@ impl Experiment for LFlow {
             }
         }
         if super::spacing_ok(m) {
-            c.two_spacings(&dims, m.spacing_m);
+            c.lattice_lengths(&dims, m.spacing_m);
         }
     }
     fn build<const D: usize>(&self, m: &Manifest) -> Scene<D> {
         build::<D>(self, m.spacing_m, m.mps.wall_layers, m.mps.dummy_layers)
+    }
+    fn domain<const D: usize>(&self, m: &Manifest) -> (Vector<D>, Vector<D>) {
+        let (vertical_part, channel) = parts::<D>(self, m.spacing_m);
+        domain::<D>(vertical_part, channel, m.spacing_m)
     }
     fn metric_names(&self, _m: &Manifest) -> Vec<&'static str> {
         vec!["l_flow_value_m"]
@@ -104,33 +108,55 @@ impl Experiment for LFlow {
     }
 }
 
+/// Cells along axis 0 (the channel), the last axis (vertical) and, in 3D, axis 1 (depth).
+fn extent<const D: usize>(p: &LFlow, spacing_m: f64, along: i64, vertical: i64) -> [i64; D] {
+    std::array::from_fn(|a| {
+        if a == 0 {
+            along
+        } else if a == D - 1 {
+            vertical
+        } else {
+            cells(p.depth_m, spacing_m)
+        }
+    })
+}
+
+/// The vertical part and the channel as lattice boxes (low and high cell indices).
+type CellBox<const D: usize> = ([i64; D], [i64; D]);
+
+fn parts<const D: usize>(p: &LFlow, spacing_m: f64) -> (CellBox<D>, CellBox<D>) {
+    let n = |x: f64| cells(x, spacing_m);
+    let (width, length) = (
+        n(p.vertical_width_m),
+        n(p.vertical_width_m + p.channel_length_m),
+    );
+    (
+        ([0; D], extent(p, spacing_m, width, n(p.vertical_height_m))),
+        ([0; D], extent(p, spacing_m, length, n(p.channel_height_m))),
+    )
+}
+
+/// Beyond one box size away from the L, fluid becomes a ghost.
+fn domain<const D: usize>(
+    vertical_part: CellBox<D>,
+    channel: CellBox<D>,
+    spacing_m: f64,
+) -> (Vector<D>, Vector<D>) {
+    let size = Vector::<D>::from_fn(|a, _| vertical_part.1[a].max(channel.1[a]) as f64 * spacing_m);
+    (-size, size * 2.0)
+}
+
 pub fn build<const D: usize>(
     p: &LFlow,
     spacing_m: f64,
     wall_layers: u32,
     dummy_layers: u32,
 ) -> Scene<D> {
-    let n = |x: f64| cells(x, spacing_m);
-    let (width, length) = (
-        n(p.vertical_width_m),
-        n(p.vertical_width_m + p.channel_length_m),
-    );
-    // Axis 0: along the channel; last axis: vertical; axis 1 in 3D: depth.
-    let extent = |along: i64, vertical: i64| -> [i64; D] {
-        std::array::from_fn(|a| {
-            if a == 0 {
-                along
-            } else if a == D - 1 {
-                vertical
-            } else {
-                n(p.depth_m)
-            }
-        })
-    };
-    let vertical_part = ([0; D], extent(width, n(p.vertical_height_m)));
-    let channel = ([0; D], extent(length, n(p.channel_height_m)));
+    let (vertical_part, channel) = parts::<D>(p, spacing_m);
+    let width = vertical_part.1[0];
     let mut particles = Particles::<D>::default();
-    for_each_index([0; D], extent(width, n(p.fill_height_m)), |idx| {
+    let fill = extent(p, spacing_m, width, cells(p.fill_height_m, spacing_m));
+    for_each_index([0; D], fill, |idx| {
         particles.push(centre(idx, spacing_m), ParticleKind::Fluid)
     });
     add_walls(
@@ -141,11 +167,11 @@ pub fn build<const D: usize>(
         wall_layers,
         dummy_layers,
     );
-    let size = Vector::<D>::from_fn(|a, _| vertical_part.1[a].max(channel.1[a]) as f64 * spacing_m);
+    let (domain_min_m, domain_max_m) = domain::<D>(vertical_part, channel, spacing_m);
     Scene {
         particles,
-        domain_min_m: -size,
-        domain_max_m: size * 2.0,
+        domain_min_m,
+        domain_max_m,
         bodies: Vec::new(),
         inlets: Vec::new(),
     }

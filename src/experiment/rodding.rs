@@ -243,11 +243,13 @@ impl Experiment for Rodding {
                 ),
             );
         }
-        c.two_spacings(
+        c.lattice_lengths(
             &[
                 ("scene.form_width_m", self.form_width_m),
+                ("scene.form_height_m", self.form_height_m),
                 ("scene.fill_height_m", self.fill_height_m),
                 ("scene.rod_width_m", self.rod_width_m),
+                ("scene.rod_length_m", self.rod_length_m),
             ],
             l0,
         );
@@ -315,27 +317,34 @@ impl Experiment for Rodding {
             end: particles.len(),
             path,
         }];
-        // Room above the form for the rod; fluid beyond one form size is a ghost.
-        let top_m = (self.tip_up_m() + self.rod_length_m).max(self.form_height_m);
+        let (domain_min_m, domain_max_m) = self.domain::<D>(m);
         Scene {
             particles,
-            domain_min_m: Vector::<D>::from_fn(|a, _| {
-                -if a == D - 1 {
-                    self.form_height_m
-                } else {
-                    self.form_width_m
-                }
-            }),
-            domain_max_m: Vector::<D>::from_fn(|a, _| {
-                if a == D - 1 {
-                    2.0 * top_m
-                } else {
-                    2.0 * self.form_width_m
-                }
-            }),
+            domain_min_m,
+            domain_max_m,
             bodies,
             inlets: Vec::new(),
         }
+    }
+
+    /// Room above the form for the rod; fluid beyond one form size is a ghost.
+    fn domain<const D: usize>(&self, _m: &Manifest) -> (Vector<D>, Vector<D>) {
+        let top_m = (self.tip_up_m() + self.rod_length_m).max(self.form_height_m);
+        let min = Vector::<D>::from_fn(|a, _| {
+            -if a == D - 1 {
+                self.form_height_m
+            } else {
+                self.form_width_m
+            }
+        });
+        let max = Vector::<D>::from_fn(|a, _| {
+            if a == D - 1 {
+                2.0 * top_m
+            } else {
+                2.0 * self.form_width_m
+            }
+        });
+        (min, max)
     }
 
     fn metric_names(&self, _m: &Manifest) -> Vec<&'static str> {

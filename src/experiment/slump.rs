@@ -95,7 +95,7 @@ impl Experiment for Slump {
                 );
             }
             if super::spacing_ok(m) {
-                c.two_spacings(&dims, m.spacing_m);
+                c.lattice_lengths(&dims, m.spacing_m);
             }
         }
     }
@@ -108,6 +108,10 @@ impl Experiment for Slump {
             m.mps.dummy_layers,
             self.lift_speed_m_s > 0.0,
         )
+    }
+
+    fn domain<const D: usize>(&self, m: &Manifest) -> (Vector<D>, Vector<D>) {
+        domain::<D>(self, m.spacing_m)
     }
 
     fn metric_names(&self, m: &Manifest) -> Vec<&'static str> {
@@ -281,6 +285,16 @@ impl Slump {
     }
 }
 
+/// Fluid beyond half a plate past the edge, or that fell well below it, is a ghost.
+fn domain<const D: usize>(p: &Slump, l0: f64) -> (Vector<D>, Vector<D>) {
+    let side = cells(0.5 * p.plate_size_m, l0) as f64 * l0;
+    let top = 2.0 * p.cone_height_m + 1.0;
+    (
+        Vector::<D>::from_fn(|a, _| if a == D - 1 { -0.5 } else { -2.0 * side }),
+        Vector::<D>::from_fn(|a, _| if a == D - 1 { top } else { 2.0 * side }),
+    )
+}
+
 /// Builds the slump scene (3D only: the manifest rejects `dimension: 2`); the cone, if any,
 /// is a rigid body lifted along z from `lift_start_s` at `lift_speed_m_s` by
 /// `lift_height_m`, then held.
@@ -347,11 +361,7 @@ pub fn build<const D: usize>(
     }
     let end = particles.len();
 
-    // Fluid beyond half a plate past the edge, or that fell well below it, is a ghost.
-    let side = half_plate as f64 * l0;
-    let top = 2.0 * p.cone_height_m + 1.0;
-    let domain_min_m = Vector::<D>::from_fn(|a, _| if a == D - 1 { -0.5 } else { -2.0 * side });
-    let domain_max_m = Vector::<D>::from_fn(|a, _| if a == D - 1 { top } else { 2.0 * side });
+    let (domain_min_m, domain_max_m) = domain::<D>(p, l0);
     Scene {
         particles,
         domain_min_m,

@@ -21,6 +21,11 @@ pub enum Range {
     },
 }
 
+/// Most spacings one scene length may span (2^24, far beyond any run that fits in memory):
+/// the size estimate's first coarse build, at 2^20 spacings, then holds a few cells per
+/// axis (a 1e19 m cone exhausted the memory there).
+pub const MAX_SPACINGS_PER_LENGTH: f64 = 16_777_216.0;
+
 pub const POSITIVE: Range = Range::Between {
     lo: Some((0.0, false)),
     hi: None,
@@ -126,8 +131,9 @@ impl Checker {
         }
     }
 
-    /// Each length must hold at least two particle spacings.
-    pub fn two_spacings(&mut self, dims: &[(&str, f64)], spacing_m: f64) {
+    /// Each length must hold at least two particle spacings, and at most
+    /// [`MAX_SPACINGS_PER_LENGTH`].
+    pub fn lattice_lengths(&mut self, dims: &[(&str, f64)], spacing_m: f64) {
         for &(field, x) in dims {
             if x < 2.0 * spacing_m {
                 self.fail(
@@ -135,6 +141,15 @@ impl Checker {
                     format!(
                         "must be >= 2 * spacing_m = {}, got {}",
                         fmt_num(2.0 * spacing_m),
+                        fmt_num(x)
+                    ),
+                );
+            } else if x > MAX_SPACINGS_PER_LENGTH * spacing_m {
+                self.fail(
+                    field,
+                    format!(
+                        "must be <= 2^24 * spacing_m = {}, got {}",
+                        fmt_num(MAX_SPACINGS_PER_LENGTH * spacing_m),
                         fmt_num(x)
                     ),
                 );

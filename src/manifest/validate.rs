@@ -8,6 +8,8 @@ use super::types::{Fluid, Manifest, SceneSection};
 
 /// Most outputs of each kind (checkpoints, clouds, diagnostics rows) a run may ask for.
 pub const MAX_OUTPUTS: f64 = 1e7;
+/// Most wall (and most dummy) layers.
+pub const MAX_LAYERS: u32 = 10;
 
 /// All issues of `m`, in field order.
 pub fn check<S: SceneSection>(m: &Manifest<S>) -> Vec<Issue> {
@@ -202,6 +204,17 @@ pub fn check<S: SceneSection>(m: &Manifest<S>) -> Vec<Issue> {
         1,
     );
     let walls_ok = c.int_at_least("mps.wall_layers", p.wall_layers.into(), 1);
+    // More layers than the Laplacian reaches (4 at most) only add particles; the bound keeps
+    // every build, the size estimate's coarse ones included, to the scene's own size (1e5
+    // layers aborted allocating them).
+    for (field, layers) in [
+        ("mps.wall_layers", p.wall_layers),
+        ("mps.dummy_layers", p.dummy_layers),
+    ] {
+        if layers > MAX_LAYERS {
+            c.fail(field, format!("must be <= {MAX_LAYERS}, got {layers}"));
+        }
+    }
     if walls_ok && lap_ok {
         // A fluid particle one spacing away from the wall must see wall or dummy particles
         // at every distance k * spacing_m < laplacian_radius * spacing_m, k = 1, 2, ...

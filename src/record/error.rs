@@ -34,6 +34,10 @@ pub enum RecordError {
     /// A `.partial` file no process holds: a killed run's, with its checkpoints.
     #[error("{} holds an unfinished run (killed, or stopped by a crash)", path.display())]
     Unfinished { path: PathBuf },
+    /// A finished file (it ends with the MCAP footer) that is not whole: the reason names the
+    /// first damaged part and its byte offset.
+    #[error("{}: damaged: {reason}", path.display())]
+    Damaged { path: PathBuf, reason: String },
 }
 
 impl RecordError {

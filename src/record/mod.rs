@@ -29,7 +29,7 @@ use mcap::records::{MessageHeader, Metadata};
 
 pub use cloud::{FRAME_ID, point_cloud, timestamp};
 pub use error::{RecordError, Result};
-pub use read::{Logged, RunFile, read_messages, read_run};
+pub use read::{FileCheck, Logged, RunFile, Stop, check_run, read_messages, read_run};
 
 use crate::build_info::BuildInfo;
 use crate::proto::foxglove::PointCloud;
