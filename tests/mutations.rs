@@ -318,6 +318,7 @@ fn seeds(dir: &Path) -> Vec<Seed> {
                 true,
             ))),
             max_particles: None,
+            overwrite: false,
         },
     )
     .unwrap();
@@ -503,8 +504,9 @@ fn use_run_file(file: &Path) {
             ..Default::default()
         },
     );
-    let _ = mps_runner::report::plot_run(file, None, Some(&svg));
-    let _ = mps_runner::report::snapshot(file, Some("tag"), false, Some(&svg));
+    let _ = mps_runner::report::plot_run(file, &[], None, Some(&svg));
+    let _ = mps_runner::report::snapshot(file, Some("tag"), false, None, Some(&svg));
+    let _ = mps_runner::report::snapshot(file, Some("tag"), false, Some(0.01), Some(&svg));
     let _ = mps_runner::report::profile(file, Some(&svg));
     let _ = mps_runner::resume::resume(
         file,

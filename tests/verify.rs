@@ -136,14 +136,23 @@ fn every_experiment_verifies_at_coarse_spacing() {
     names.sort();
     assert!(!names.is_empty());
     for name in names {
-        let resolved = common::resolve(
-            &name,
-            &[
-                "spacing_m=0.025",
-                "time.end_s=0.05",
-                "output.checkpoint_interval_s=0.01",
-            ],
-        );
+        let mut sets = vec![
+            "spacing_m=0.025",
+            "time.end_s=0.05",
+            "output.checkpoint_interval_s=0.01",
+        ];
+        if name == "rodding_2d.yaml" {
+            // At 25 mm the rod must be two spacings wide and one spacing from the walls and
+            // the floor: one 50 mm rod in the middle of the 150 mm form.
+            sets.extend([
+                "scene.rod_width_m=0.05",
+                "scene.stroke_positions_m.0=0.075",
+                "scene.stroke_positions_m.1=0.075",
+                "scene.stroke_positions_m.2=0.075",
+                "scene.stroke_bottom_m=0.025",
+            ]);
+        }
+        let resolved = common::resolve(&name, &sets);
         let result = common::run_in(&resolved, dir.path(), 2);
         let report = verify(
             &result.path,
