@@ -143,7 +143,11 @@ fn each_bad_input_is_refused_naming_the_field_with_exit_2_and_no_file() {
             "| `{}` | {:?} | {} |",
             args.join(" "),
             result.status.code(),
-            stderr.lines().next().unwrap_or("").replace('|', "\\|")
+            stderr
+                .lines()
+                .find(|l| l.starts_with("error"))
+                .unwrap_or("")
+                .replace('|', "\\|")
         );
         let files = std::fs::read_dir(out.path()).unwrap().count();
         if result.status.code() != Some(2) || !stderr.contains(fragment) || files != 0 {
