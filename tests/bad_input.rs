@@ -282,17 +282,7 @@ fn a_finished_run_cut_short_is_called_incomplete_not_verified() {
     let mut bytes = std::fs::read(&path).unwrap();
     bytes.pop();
     std::fs::write(&cut, &bytes).unwrap();
-    let runner = |args: &[&str]| {
-        let out = Command::cargo_bin("runner")
-            .unwrap()
-            .args(args)
-            .output()
-            .unwrap();
-        (
-            out.status.code(),
-            String::from_utf8_lossy(&out.stderr).to_string(),
-        )
-    };
+    let runner = |args: &[&str]| common::runner_output(args);
     let cut_s = cut.to_str().unwrap();
     let svg = dir.path().join("x.svg");
     for args in [

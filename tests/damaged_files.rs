@@ -3,21 +3,12 @@
 //! corrupt later chunk is read up to the last intact chunk and resumes from the last
 //! checkpoint before the damage, to the same bits as a run that was never killed.
 mod common;
-use assert_cmd::Command;
 use mps_runner::record::{RunFile, read_run};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 fn runner(args: &[&std::ffi::OsStr]) -> (Option<i32>, String) {
-    let out = Command::cargo_bin("runner")
-        .unwrap()
-        .args(args)
-        .output()
-        .unwrap();
-    (
-        out.status.code(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
+    common::runner_output(args)
 }
 
 /// A completed smoke run (6 checkpoints) in `dir`.

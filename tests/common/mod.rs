@@ -73,3 +73,16 @@ pub fn assert_replays(path: &Path, from: Option<u32>) {
     .unwrap();
     assert!(report.passed(), "{report}");
 }
+
+/// Runs the `runner` binary with `args`: its exit code and its stderr.
+pub fn runner_output<S: AsRef<std::ffi::OsStr>>(args: &[S]) -> (Option<i32>, String) {
+    let out = assert_cmd::Command::cargo_bin("runner")
+        .unwrap()
+        .args(args)
+        .output()
+        .unwrap();
+    (
+        out.status.code(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
