@@ -359,9 +359,21 @@ fn describe<S: SceneSection>(e: &serde_saphyr::Error, map: &SourceMap) -> Descri
                 .as_deref()
                 .and_then(|p| map.entries.get(p))
                 .and_then(|e| e.scalar.as_deref());
+            // serde-saphyr names the Rust type ("u64", "floating point"); say what to write.
+            let wanted = match *ty {
+                "u8" | "u16" | "u32" | "u64" | "u128" | "usize" => {
+                    format!("a whole number >= 0 (fits {ty})")
+                }
+                "i8" | "i16" | "i32" | "i64" | "i128" | "isize" => {
+                    format!("a whole number (fits {ty})")
+                }
+                "floating point" | "f32" | "f64" => "a number".to_string(),
+                "bool" => "true or false".to_string(),
+                other => format!("a value of type {other}"),
+            };
             let message = match text {
-                Some(t) => format!("invalid {ty}: {t:?}"),
-                None => format!("invalid {ty}"),
+                Some(t) => format!("expected {wanted}, got {t:?}"),
+                None => format!("expected {wanted}"),
             };
             (at, message)
         }
