@@ -360,14 +360,8 @@ impl Experiment for Rodding {
         time_s: f64,
         out: &mut BTreeMap<String, f64>,
     ) {
-        let shares = band_shares(particles, self.tip_up_m());
-        let up = D - 1;
-        let on_rod = (0..particles.len())
-            .filter(|&i| {
-                particles.kind[i] == ParticleKind::Fluid
-                    && particles.position_m[i][up] > self.tip_up_m()
-            })
-            .count();
+        let (shares, in_form) = band_shares(particles, self.tip_up_m());
+        let on_rod = particles.fluid_count() - in_form;
         out.insert("fluid_on_rod_count".into(), on_rod as f64);
         for (band, row) in shares.iter().enumerate() {
             for (layer, share) in row.iter().enumerate() {
@@ -386,8 +380,12 @@ impl Experiment for Rodding {
 /// shares[band][layer]: the fluid particles at most `max_height_m` high (the concrete in the
 /// form; above it, fluid clings to the rod) ranked by height (ties by x, then index) and cut
 /// into three bands of equal count, bottom to top; in each, the share from each layer. Bands
-/// by rank, not by fixed heights, so that a surface that moves does not empty a band.
-pub fn band_shares<const D: usize>(p: &Particles<D>, max_height_m: f64) -> [[f64; 3]; 3] {
+/// by rank, not by fixed heights, so that a surface that moves does not empty a band. Also
+/// the number of fluid particles in those bands.
+pub fn band_shares<const D: usize>(
+    p: &Particles<D>,
+    max_height_m: f64,
+) -> ([[f64; 3]; 3], usize) {
     let up = D - 1;
     let mut fluid: Vec<usize> = (0..p.len())
         .filter(|&i| p.kind[i] == ParticleKind::Fluid && p.position_m[i][up] <= max_height_m)
@@ -409,7 +407,7 @@ pub fn band_shares<const D: usize>(p: &Particles<D>, max_height_m: f64) -> [[f64
             counts[band][layer] += 1;
         }
     }
-    std::array::from_fn(|band| {
+    let shares = std::array::from_fn(|band| {
         std::array::from_fn(|layer| {
             if sizes[band] == 0 {
                 0.0
@@ -417,7 +415,8 @@ pub fn band_shares<const D: usize>(p: &Particles<D>, max_height_m: f64) -> [[f64
                 counts[band][layer] as f64 / sizes[band] as f64
             }
         })
-    })
+    });
+    (shares, n)
 }
 
 /// 1 - sqrt(S / S0), S = sum over bands and layers of (share - 1/3)^2 and S0 = 2 its value
