@@ -151,8 +151,8 @@ fn run_point(
         let result = RunResult {
             path,
             outcome,
+            stop_reason: summary.stop.clone(),
             summary,
-            stop_reason: String::new(),
             wall_time_s: 0.0,
             timing: Default::default(),
         };

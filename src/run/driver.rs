@@ -283,6 +283,7 @@ pub fn time_loop<const D: usize>(
         metrics: metrics.into_iter().collect(),
         checkpoints,
         experiment_sha256: experiment_sha256.to_string(),
+        stop: stop_reason.clone(),
     };
     Ok(LoopEnd {
         outcome,

@@ -362,6 +362,19 @@ fn compare_summaries(
             logged.reason, replayed.reason
         ));
     }
+    if logged.stop != replayed.stop {
+        if logged.stop.is_empty() && logged.outcome == "completed" {
+            notes.push(format!(
+                "summary stop: the file does not record why the run stopped (written before the summary's stop field); the replay stopped by: {}",
+                replayed.stop
+            ));
+        } else if logged.outcome != "interrupted" {
+            out.push(format!(
+                "summary stop: logged {:?}, replayed {:?}",
+                logged.stop, replayed.stop
+            ));
+        }
+    }
     let keys: std::collections::BTreeSet<&String> = logged
         .metrics
         .keys()
