@@ -580,4 +580,23 @@ mod tests {
         let other = summary(&[("closed_form_radius_m", x), ("spread_radius_mean_m", next)]);
         assert_eq!(compare_summaries(&logged, &other, true).0.len(), 1);
     }
+
+    #[test]
+    fn the_stop_rule_must_match_unless_the_file_predates_it() {
+        let with_stop = |stop: &str| Summary {
+            stop: stop.into(),
+            ..summary(&[])
+        };
+        let rule = with_stop("90.0 % of the fluid particles are non-flowing");
+        // A completed file without the field (written before it): a note, not a mismatch.
+        let (problems, notes) = compare_summaries(&with_stop(""), &rule, false);
+        assert!(problems.is_empty(), "{problems:?}");
+        assert_eq!(notes.len(), 1);
+        // Recorded and different (the replay ran to the end, or stopped by another rule).
+        for replayed in [with_stop(""), with_stop("settled")] {
+            let (problems, _) = compare_summaries(&rule, &replayed, false);
+            assert_eq!(problems.len(), 1, "{problems:?}");
+        }
+        assert_eq!(compare_summaries(&rule, &rule, false), (vec![], vec![]));
+    }
 }
