@@ -1,4 +1,5 @@
 pub mod build_info;
+pub mod calibrate;
 pub mod checkpoint;
 pub mod experiment;
 pub mod manifest;

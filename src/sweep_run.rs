@@ -114,7 +114,7 @@ pub fn run_sweep(
 
 /// One point: its finished file taken as it is, an interrupted or killed run of it resumed,
 /// or a run (see the module documentation).
-fn run_point(
+pub(crate) fn run_point(
     resolved: &Resolved,
     options: &RunOptions,
 ) -> (Result<RunResult, RunError>, PointStart) {

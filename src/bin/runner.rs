@@ -12,7 +12,7 @@ use mps_runner::run::{RunError, RunOptions, run};
 use mps_runner::sweep_run::{PointStart, SweepOptions, run_sweep};
 use mps_runner::verify::trend::{TrendOptions, trend};
 use mps_runner::verify::{VerifyOptions, verify};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -121,6 +121,20 @@ enum Command {
         /// Output file (default: <run>-<metric>[-vs-<x>].svg beside the run).
         #[arg(long)]
         out: Option<PathBuf>,
+    },
+    /// Back-calculate a manifest value (the yield stress) from a measured result (e.g. a
+    /// slump-flow diameter or an L-flow value) given in a calibration manifest: runs the
+    /// base experiment until a run matches within the tolerance, and writes
+    /// calibration.json and a figure into OUT/<name>-calib-<hash>/ (exit 0 fitted, 2 bad
+    /// input, 3 not fitted, 130 interrupted; run it again to go on: finished runs are reused).
+    Calibrate {
+        calibration: PathBuf,
+        /// Parent folder of the calibration's folder.
+        #[arg(long, default_value = "runs")]
+        out: PathBuf,
+        /// Refuse runs estimated to hold more particles than this.
+        #[arg(long = "max-particles", value_name = "N", default_value_t = 5_000_000)]
+        max_particles: u64,
     },
     /// Plot a summary metric of every run in a folder against a manifest value (SVG).
     PlotSweep {
@@ -317,7 +331,110 @@ fn main() -> ExitCode {
                 path
             }))
         }
+        Some(Command::Calibrate {
+            calibration,
+            out,
+            max_particles,
+        }) => calibrate_command(&calibration, out, max_particles),
         None => run_command(cli.run),
+    }
+}
+
+fn calibrate_command(path: &Path, out_dir: PathBuf, max_particles: u64) -> ExitCode {
+    use mps_runner::calibrate::{self, CalibrateError, CalibrateOptions};
+    let plan = match calibrate::load(path) {
+        Ok(p) => p,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return ExitCode::from(EXIT_BAD_INPUT);
+        }
+    };
+    eprintln!(
+        "{}: fitting {} in [{}, {}] to {} = {} (tolerance {}), {} run(s) per round",
+        plan.calibration.name,
+        plan.parameter,
+        plan.bounds[0],
+        plan.bounds[1],
+        plan.metric,
+        plan.target,
+        plan.tolerance,
+        plan.calibration.points_per_round
+    );
+    let options = CalibrateOptions {
+        out_dir,
+        interrupt: interrupt_flag(),
+        max_particles: Some(max_particles),
+    };
+    let on_run = |fit: &calibrate::Fit, e: &calibrate::Evaluation| {
+        eprintln!(
+            "  [spacing {} m, round {}] {} = {} -> {} = {:.5} (off by {:+.5}; {} {}, {})",
+            fit.spacing_m,
+            e.round,
+            plan.parameter,
+            e.parameter,
+            plan.metric,
+            e.metric,
+            e.metric - plan.target,
+            e.start,
+            e.outcome,
+            e.file
+        );
+    };
+    let (dir, record, result) = calibrate::calibrate(&plan, &options, &on_run);
+    match calibrate::write_record(&dir, &record) {
+        Ok((json, figure)) => {
+            for fit in &record.fits {
+                if let Some(b) = fit.bracket {
+                    eprintln!(
+                        "spacing {} m: bracket {} in [{}, {}] ({} = {:.5} .. {:.5})",
+                        fit.spacing_m, plan.parameter, b[0].0, b[1].0, plan.metric, b[0].1, b[1].1
+                    );
+                }
+                if let (Some(f), Some(best)) = (fit.fitted, fit.best) {
+                    eprintln!(
+                        "spacing {} m: fitted {} = {:.4} (log-log interpolation in the bracket); closest run {} gives {:.5}{}",
+                        fit.spacing_m,
+                        plan.parameter,
+                        f,
+                        best.0,
+                        best.1,
+                        if fit.converged {
+                            ""
+                        } else {
+                            " (not within the tolerance)"
+                        }
+                    );
+                }
+            }
+            if let Some(share) = record.resolution_share {
+                eprintln!(
+                    "resolution: the fitted values at the two spacings differ by {:.1} %",
+                    100.0 * share
+                );
+            }
+            eprintln!("figure: {}", figure.display());
+            println!("{}", json.display());
+        }
+        Err(e) => {
+            eprintln!(
+                "error: cannot write the calibration record in {}: {e}",
+                dir.display()
+            );
+            return ExitCode::from(EXIT_INTERNAL);
+        }
+    }
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e}");
+            match e {
+                CalibrateError::Manifest(_) | CalibrateError::OutOfBounds(_) => {
+                    ExitCode::from(EXIT_BAD_INPUT)
+                }
+                CalibrateError::Interrupted(_) => ExitCode::from(EXIT_INTERRUPTED),
+                _ => ExitCode::from(EXIT_SIM_FAILED),
+            }
+        }
     }
 }
 

@@ -67,6 +67,11 @@ pub trait Experiment {
     );
     /// The summary metric that `runner verify --trend` follows by default.
     fn trend_metric(&self) -> &'static str;
+    /// The yield stress (Pa) that a closed form of the test gives for `value` of `metric`,
+    /// where it has one: the first guess of `runner calibrate`.
+    fn yield_stress_guess_pa(&self, _m: &Manifest, _metric: &str, _value: f64) -> Option<f64> {
+        None
+    }
 }
 
 /// Declares the tests: their modules, the [`SceneSpec`] enum (one variant per `scene.kind`)
@@ -162,6 +167,11 @@ impl SceneSpec {
 }
 
 /// Reads, overrides, checks and hashes the manifest at `path`.
+/// See [`Experiment::yield_stress_guess_pa`].
+pub fn yield_stress_guess_pa(m: &Manifest, metric: &str, value: f64) -> Option<f64> {
+    with_experiment!(&m.scene, e => e.yield_stress_guess_pa(m, metric, value))
+}
+
 pub fn load(path: &Path, overrides: &[String]) -> manifest::Result<Resolved> {
     manifest::load(path, overrides)
 }

@@ -190,6 +190,19 @@ impl Experiment for Slump {
     fn trend_metric(&self) -> &'static str {
         "spread_diameter_m"
     }
+
+    /// The pancake law inverted for the cone's volume: tau_0 = 225 rho g V^2 / (128 pi^2 R^5).
+    fn yield_stress_guess_pa(&self, m: &Manifest, metric: &str, value: f64) -> Option<f64> {
+        let radius_m = match metric {
+            "spread_diameter_m" => 0.5 * value,
+            "spread_radius_mean_m" => value,
+            _ => return None,
+        };
+        let v = self.cone_volume_m3();
+        let pi2 = std::f64::consts::PI * std::f64::consts::PI;
+        let r5 = libm::pow(radius_m, 5.0);
+        Some(225.0 * m.fluid.density_kg_m3() * m.gravity_m_s2 * v * v / (128.0 * pi2 * r5))
+    }
 }
 
 /// One radius of a slump-flow surface profile (m).

@@ -17,7 +17,7 @@ pub mod boundaries;
 pub mod canonical;
 pub mod checker;
 mod error;
-mod locate;
+pub mod locate;
 mod overrides;
 pub mod shape;
 pub mod sweep;
@@ -184,7 +184,7 @@ fn parent(path: &str) -> &str {
 }
 
 /// A serde-saphyr error as `ManifestError::Syntax`.
-fn syntax_error<S: SceneSection>(
+pub fn syntax_error<S: SceneSection>(
     e: &serde_saphyr::Error,
     source_name: &str,
     text: &str,
