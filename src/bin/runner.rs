@@ -171,8 +171,10 @@ enum Command {
     Export {
         /// Run file, or a folder of run files (a sweep folder).
         path: PathBuf,
+        /// CSV with a header line (empty cells where a row has no value).
         #[arg(long)]
         csv: bool,
+        /// JSON: columns and rows, each row an object with every column (null where missing).
         #[arg(long)]
         json: bool,
         /// FILE: the one-row summary table (as for a folder) instead of the diagnostics.
