@@ -168,6 +168,36 @@ enum Command {
         #[arg(long)]
         out: Option<PathBuf>,
     },
+    /// What a run file holds: experiment, outcome, stop rule, build, particles, time,
+    /// checkpoints, metrics, channels; for an unfinished or cut file, what is missing (exit 0;
+    /// 2 when the file is unusable, or named finished but incomplete: it is described, then
+    /// refused).
+    Info {
+        file: PathBuf,
+        /// One JSON object instead of the text block.
+        #[arg(long)]
+        json: bool,
+    },
+    /// A run's diagnostics time series (one row per /diagnostics message), or with DIR one
+    /// row per run file of a sweep folder (its swept manifest values and summary metrics), as
+    /// CSV or JSON.
+    #[command(group(clap::ArgGroup::new("format").required(true).args(["csv", "json"])))]
+    Export {
+        /// Run file, or a folder of run files (a sweep folder).
+        path: PathBuf,
+        /// CSV with a header line (empty cells where a row has no value).
+        #[arg(long)]
+        csv: bool,
+        /// JSON: columns and rows, each row an object with every column (null where missing).
+        #[arg(long)]
+        json: bool,
+        /// FILE: the one-row summary table (as for a folder) instead of the diagnostics.
+        #[arg(long)]
+        summary: bool,
+        /// Write here instead of stdout (the path is printed).
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
     /// Slump-flow runs: the surface h(r) of the last checkpoint against the closed form
     /// (Roussel & Coussot 2005), printed as a table and drawn (SVG).
     Profile {
@@ -331,6 +361,14 @@ fn main() -> ExitCode {
                 path
             }))
         }
+        Some(Command::Info { file, json }) => info_command(&file, json),
+        Some(Command::Export {
+            path,
+            csv,
+            json: _,
+            summary,
+            out,
+        }) => export_command(&path, csv, summary, out.as_deref()),
         Some(Command::Calibrate {
             calibration,
             out,
@@ -438,7 +476,126 @@ fn calibrate_command(path: &Path, out_dir: PathBuf, max_particles: u64) -> ExitC
     }
 }
 
-/// What a run file's structure lets verify, resume, plot, snapshot and profile do with it
+/// `runner info`: a finished file or a `.partial` (damaged or not, with a warning) is
+/// described, exit 0; a file named finished without its end is described with what it
+/// misses, then refused (exit 2, as verify does); an unusable one is refused (exit 2).
+fn info_command(file: &std::path::Path, json: bool) -> ExitCode {
+    let incomplete = match file_state(file) {
+        FileState::Unusable(why) => {
+            eprintln!("error: {why}");
+            return ExitCode::from(EXIT_BAD_INPUT);
+        }
+        FileState::Incomplete(why) => Some(why),
+        FileState::PartialDamaged(why) => {
+            eprintln!("warning: {why}");
+            None
+        }
+        FileState::Usable => None,
+    };
+    let info = match report::info::info(file) {
+        Ok(i) => i,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return ExitCode::from(EXIT_BAD_INPUT);
+        }
+    };
+    if json {
+        match serde_json::to_string_pretty(&info) {
+            Ok(text) => println!("{text}"),
+            Err(e) => {
+                eprintln!("error: {e}");
+                return ExitCode::from(EXIT_INTERNAL);
+            }
+        }
+    } else {
+        print!("{info}");
+    }
+    match incomplete {
+        Some(why) => {
+            eprintln!("error: {why}");
+            ExitCode::from(EXIT_BAD_INPUT)
+        }
+        None => ExitCode::SUCCESS,
+    }
+}
+
+/// `runner export`: a run file as its diagnostics (or with `summary` its one-row summary),
+/// a folder as one summary row per finished run file; CSV (`csv`) or JSON, to stdout or
+/// `out`. A run file is taken as plot takes it (`readable_run`).
+fn export_command(
+    path: &std::path::Path,
+    csv: bool,
+    summary: bool,
+    out: Option<&std::path::Path>,
+) -> ExitCode {
+    use mps_runner::report::export::{export_dir, export_file};
+    let text = if path.is_dir() {
+        let (table, skipped) = match export_dir(path) {
+            Ok(t) => t,
+            Err(e) => {
+                eprintln!("error: {e}");
+                return ExitCode::from(EXIT_BAD_INPUT);
+            }
+        };
+        for (file, why) in &skipped {
+            eprintln!("skipped {}: {why}", file.display());
+        }
+        if csv {
+            table.to_csv()
+        } else {
+            let mut value = table.to_json();
+            value["dir"] = path.display().to_string().into();
+            value["skipped"] = skipped
+                .iter()
+                .map(|(f, why)| serde_json::json!({"file": f.display().to_string(), "reason": why}))
+                .collect();
+            value.to_string() + "\n"
+        }
+    } else {
+        if let Err(code) = readable_run(path) {
+            return code;
+        }
+        let (diagnostics, summary_row) = match export_file(path) {
+            Ok(t) => t,
+            Err(e) => {
+                eprintln!("error: {e}");
+                return ExitCode::from(EXIT_BAD_INPUT);
+            }
+        };
+        match (csv, summary) {
+            (true, false) => diagnostics.to_csv(),
+            (true, true) => summary_row.to_csv(),
+            (false, true) => summary_row.to_json().to_string() + "\n",
+            (false, false) => {
+                serde_json::json!({
+                    "file": path.display().to_string(),
+                    "diagnostics": diagnostics.to_json(),
+                    "summary": summary_row.to_json(),
+                })
+                .to_string()
+                    + "\n"
+            }
+        }
+    };
+    match out {
+        None => {
+            print!("{text}");
+            ExitCode::SUCCESS
+        }
+        Some(out) => match std::fs::write(out, text) {
+            Ok(()) => {
+                println!("{}", out.display());
+                ExitCode::SUCCESS
+            }
+            Err(e) => {
+                eprintln!("error: cannot write {}: {e}", out.display());
+                ExitCode::from(EXIT_INTERNAL)
+            }
+        },
+    }
+}
+
+/// What a run file's structure lets verify, resume, info, plot, snapshot, profile and export do with it
 /// (see `record::read`: the reader that checks it is the one they read with).
 enum FileState {
     /// Finished and whole, or a `.partial` that ends as a killed run leaves it (on a record
@@ -482,7 +639,7 @@ fn file_state(path: &std::path::Path) -> FileState {
     }
 }
 
-/// For the commands that present a file's contents (plot, snapshot, profile): an incomplete
+/// For the commands that present a file's contents (plot, snapshot, profile, export): an incomplete
 /// or damaged finished file is refused (exit 2) rather than drawn from part of it; a
 /// `.partial` file is drawn with a warning (and another where it is damaged).
 fn readable_run(path: &std::path::Path) -> Result<(), ExitCode> {

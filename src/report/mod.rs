@@ -1,11 +1,14 @@
 //! Reports made from recorded runs: SVG plots of diagnostics, sweep results and particle
-//! snapshots (`runner plot`, `runner plot-sweep`, `runner snapshot`).
+//! snapshots (`runner plot`, `runner plot-sweep`, `runner snapshot`); what a run file holds
+//! (`runner info`, [`info`]) and its data as tables (`runner export`, [`export`]).
 //!
 //! Plots are SVG, drawn with `plotters`' SVG backend: text is written as SVG `<text>`
 //! elements, so no font has to be found or rasterised (no fontconfig/freetype, nothing to
 //! install, no font file to ship).
 
 pub mod cloud;
+pub mod export;
+pub mod info;
 pub mod plot;
 
 use std::collections::BTreeMap;

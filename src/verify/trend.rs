@@ -87,8 +87,8 @@ fn distinct_x(g: &Group) -> usize {
     xs.len()
 }
 
-/// Dotted leaf keys of a JSON value, with their JSON text.
-fn flatten(v: &serde_json::Value, prefix: &str, out: &mut BTreeMap<String, String>) {
+/// Dotted leaf keys of a JSON value (a stored canonical manifest), with their JSON text.
+pub fn flatten(v: &serde_json::Value, prefix: &str, out: &mut BTreeMap<String, String>) {
     match v {
         serde_json::Value::Object(map) => {
             for (k, child) in map {
@@ -104,6 +104,23 @@ fn flatten(v: &serde_json::Value, prefix: &str, out: &mut BTreeMap<String, Strin
             out.insert(prefix.to_string(), other.to_string());
         }
     }
+}
+
+/// The keys of flattened manifests ([`flatten`]) whose value is not the same in all of them
+/// (a key absent from some counts as differing), sorted; `name` and `output.*` are left
+/// out: they do not change the physics. For a sweep folder: the swept keys.
+pub fn varying_keys(manifests: &[&BTreeMap<String, String>]) -> Vec<String> {
+    let all_keys: std::collections::BTreeSet<&String> =
+        manifests.iter().flat_map(|k| k.keys()).collect();
+    all_keys
+        .into_iter()
+        .filter(|k| *k != "name" && !k.starts_with("output."))
+        .filter(|k| {
+            let first = manifests[0].get(*k);
+            manifests.iter().any(|keys| keys.get(*k) != first)
+        })
+        .cloned()
+        .collect()
 }
 
 /// Least-squares fit of ln y = ln a + b ln x over the points with x > 0 and y > 0.
@@ -222,17 +239,11 @@ pub fn trend(dir: &Path, options: &TrendOptions) -> Result<TrendReport, String> 
             options.x_key,
         ));
     }
-    // Keys that tell runs apart, besides x: every key whose value is not the same in all.
-    let all_keys: std::collections::BTreeSet<&String> =
-        runs.iter().flat_map(|(k, _)| k.keys()).collect();
-    let varying: Vec<String> = all_keys
+    // Keys that tell runs apart, besides x.
+    let manifests: Vec<&BTreeMap<String, String>> = runs.iter().map(|(k, _)| k).collect();
+    let varying: Vec<String> = varying_keys(&manifests)
         .into_iter()
-        .filter(|k| **k != options.x_key && *k != "name" && !k.starts_with("output."))
-        .filter(|k| {
-            let first = runs[0].0.get(*k);
-            runs.iter().any(|(keys, _)| keys.get(*k) != first)
-        })
-        .cloned()
+        .filter(|k| *k != options.x_key)
         .collect();
     let mut groups: BTreeMap<Vec<(String, String)>, Vec<Point>> = BTreeMap::new();
     for (keys, point) in runs {
