@@ -30,19 +30,12 @@ fn calibration_text(measured_m: f64, tolerance_m: f64) -> String {
 }
 
 fn calibrate(path: &Path, out: &Path) -> (Option<i32>, String, String) {
-    let o = assert_cmd::Command::cargo_bin("runner")
-        .unwrap()
-        .arg("calibrate")
-        .arg(path)
-        .arg("--out")
-        .arg(out)
-        .output()
-        .unwrap();
-    (
-        o.status.code(),
-        String::from_utf8_lossy(&o.stdout).into_owned(),
-        String::from_utf8_lossy(&o.stderr).into_owned(),
-    )
+    common::runner_all(&[
+        "calibrate".as_ref(),
+        path.as_os_str(),
+        "--out".as_ref(),
+        out.as_os_str(),
+    ])
 }
 
 #[test]

@@ -5,19 +5,7 @@ use mps_runner::record::{check_run, read_run};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 
-/// Runs the `runner` binary: exit code, stdout, stderr.
-fn runner<S: AsRef<std::ffi::OsStr>>(args: &[S]) -> (Option<i32>, String, String) {
-    let out = assert_cmd::Command::cargo_bin("runner")
-        .unwrap()
-        .args(args)
-        .output()
-        .unwrap();
-    (
-        out.status.code(),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
-}
+use common::runner_all as runner;
 
 /// A finished smoke_2d run in `dir`.
 fn smoke(dir: &Path) -> PathBuf {

@@ -476,21 +476,30 @@ fn calibrate_command(path: &Path, out_dir: PathBuf, max_particles: u64) -> ExitC
     }
 }
 
+/// For verify and info: an unusable file is refused (exit 2); a damaged `.partial` is read
+/// with a warning; a file named finished without its end gives why (Some), to be reported.
+fn incomplete_or_refused(file: &Path) -> Result<Option<String>, ExitCode> {
+    match file_state(file) {
+        FileState::Unusable(why) => {
+            eprintln!("error: {why}");
+            Err(ExitCode::from(EXIT_BAD_INPUT))
+        }
+        FileState::Incomplete(why) => Ok(Some(why)),
+        FileState::PartialDamaged(why) => {
+            eprintln!("warning: {why}");
+            Ok(None)
+        }
+        FileState::Usable => Ok(None),
+    }
+}
+
 /// `runner info`: a finished file or a `.partial` (damaged or not, with a warning) is
 /// described, exit 0; a file named finished without its end is described with what it
 /// misses, then refused (exit 2, as verify does); an unusable one is refused (exit 2).
 fn info_command(file: &std::path::Path, json: bool) -> ExitCode {
-    let incomplete = match file_state(file) {
-        FileState::Unusable(why) => {
-            eprintln!("error: {why}");
-            return ExitCode::from(EXIT_BAD_INPUT);
-        }
-        FileState::Incomplete(why) => Some(why),
-        FileState::PartialDamaged(why) => {
-            eprintln!("warning: {why}");
-            None
-        }
-        FileState::Usable => None,
+    let incomplete = match incomplete_or_refused(file) {
+        Ok(i) => i,
+        Err(code) => return code,
     };
     let info = match report::info::info(file) {
         Ok(i) => i,
@@ -717,17 +726,9 @@ fn verify_command(args: VerifyArgs) -> ExitCode {
     }
     let file = args.file.expect("clap requires FILE without --trend");
     // An incomplete file still has its checkpoints replayed, but is not called verified.
-    let incomplete = match file_state(&file) {
-        FileState::Unusable(why) => {
-            eprintln!("error: {why}");
-            return ExitCode::from(EXIT_BAD_INPUT);
-        }
-        FileState::Incomplete(why) => Some(why),
-        FileState::PartialDamaged(why) => {
-            eprintln!("warning: {why}");
-            None
-        }
-        FileState::Usable => None,
+    let incomplete = match incomplete_or_refused(&file) {
+        Ok(i) => i,
+        Err(code) => return code,
     };
     let options = VerifyOptions {
         from: args.from,

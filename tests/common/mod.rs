@@ -76,6 +76,12 @@ pub fn assert_replays(path: &Path, from: Option<u32>) {
 
 /// Runs the `runner` binary with `args`: its exit code and its stderr.
 pub fn runner_output<S: AsRef<std::ffi::OsStr>>(args: &[S]) -> (Option<i32>, String) {
+    let (code, _, stderr) = runner_all(args);
+    (code, stderr)
+}
+
+/// Runs the `runner` binary with `args`: its exit code, stdout and stderr.
+pub fn runner_all<S: AsRef<std::ffi::OsStr>>(args: &[S]) -> (Option<i32>, String, String) {
     let out = assert_cmd::Command::cargo_bin("runner")
         .unwrap()
         .args(args)
@@ -83,6 +89,7 @@ pub fn runner_output<S: AsRef<std::ffi::OsStr>>(args: &[S]) -> (Option<i32>, Str
         .unwrap();
     (
         out.status.code(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
         String::from_utf8_lossy(&out.stderr).into_owned(),
     )
 }
