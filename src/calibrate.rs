@@ -206,13 +206,19 @@ pub fn load(path: &Path) -> Result<Plan, ManifestError> {
         sets.push(format!("spacing_m={s}"));
         experiment::load(&base_path, &sets)?;
     }
-    if !experiment::metric_names(&base.manifest).contains(metric) {
+    let mut known = experiment::metric_names(&base.manifest);
+    known.extend(
+        experiment::crossings(&base.manifest)
+            .iter()
+            .map(|c| c.name.to_string()),
+    );
+    if !known.contains(metric) {
         return Err(bad(
             &format!("measured.{metric}"),
             format!(
                 "is not a metric of the {} test; it records: {}",
                 base.manifest.scene_kind(),
-                experiment::metric_names(&base.manifest).join(", ")
+                known.join(", ")
             ),
         ));
     }
@@ -488,8 +494,14 @@ fn widening_points(
     }
     ok.sort_by(|a, b| a.0.total_cmp(&b.0));
     let (first, last) = (ok[0], ok[ok.len() - 1]);
-    // The direction from the data; with one run, a yield stress that rises shortens the flow.
-    let falling = if ok.len() > 1 { last.1 < first.1 } else { true };
+    // The direction from the data when the runs differ by more than the tolerance (a
+    // simulated metric scatters by about a spacing); else the physical prior: a flow length
+    // falls as the yield stress (or viscosity) rises, a time (a metric in seconds) rises.
+    let falling = if (last.1 - first.1).abs() > plan.tolerance {
+        last.1 < first.1
+    } else {
+        !plan.metric.ends_with("_s")
+    };
     let below = first.1 < plan.target; // every metric is below the target
     let go_down = below == falling;
     let (from, bound) = if go_down { (first, lo) } else { (last, hi) };

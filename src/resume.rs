@@ -247,6 +247,13 @@ fn resume_in<const D: usize>(job: Job) -> Result<RunResult, ResumeError> {
         restored: true,
         checkpoints,
         last_checkpoint_step: from_scheduled.then_some(from.step),
+        logged_rows: copy
+            .iter()
+            .filter_map(|(_, msg)| match msg {
+                Logged::Diagnostics(d) => Some(crate::run::logged_row(d)),
+                _ => None,
+            })
+            .collect(),
     };
     let end = time_loop(
         m,

@@ -67,6 +67,11 @@ pub trait Experiment {
     );
     /// The summary metric that `runner verify --trend` follows by default.
     fn trend_metric(&self) -> &'static str;
+    /// Times at which a metric first reaches a threshold (e.g. the slump's t500), found by
+    /// the time loop at the diagnostics times and recorded in the summary.
+    fn crossings(&self, _m: &Manifest) -> Vec<Crossing> {
+        Vec::new()
+    }
     /// The yield stress (Pa) that a closed form of the test gives for `value` of `metric`,
     /// where it has one: the first guess of `runner calibrate`.
     fn yield_stress_guess_pa(&self, _m: &Manifest, _metric: &str, _value: f64) -> Option<f64> {
@@ -167,6 +172,76 @@ impl SceneSpec {
 }
 
 /// Reads, overrides, checks and hashes the manifest at `path`.
+/// A summary metric `name` = the time, counted from `since_s`, at which `metric` first
+/// reaches `threshold`: linear interpolation between the two diagnostics rows around the
+/// crossing (so it is known to better than `output.diagnostics_interval_s`). Left out of the
+/// summary when the run never reaches it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Crossing {
+    pub name: &'static str,
+    pub metric: &'static str,
+    pub threshold: f64,
+    pub since_s: f64,
+}
+
+/// See [`Experiment::crossings`].
+pub fn crossings(m: &Manifest) -> Vec<Crossing> {
+    with_experiment!(&m.scene, e => e.crossings(m))
+}
+
+/// Summary metrics that builds before them did not record: a file without one is not a
+/// mismatch for `runner verify`, which says so in a note.
+pub const LATER_METRICS: &[&str] = &["t500_s"];
+
+/// The first crossing of each [`Crossing`], fed with the diagnostics rows in time order.
+#[derive(Debug, Clone, Default)]
+pub struct CrossingTracker {
+    crossings: Vec<Crossing>,
+    previous: Option<(f64, BTreeMap<String, f64>)>,
+    found: BTreeMap<String, f64>,
+}
+
+impl CrossingTracker {
+    pub fn new(m: &Manifest) -> Self {
+        Self {
+            crossings: crossings(m),
+            ..Self::default()
+        }
+    }
+    pub fn is_empty(&self) -> bool {
+        self.crossings.is_empty()
+    }
+    /// One diagnostics row: its time and experiment metrics.
+    pub fn row(&mut self, time_s: f64, metrics: &BTreeMap<String, f64>) {
+        for c in &self.crossings {
+            if self.found.contains_key(c.name) || time_s < c.since_s {
+                continue;
+            }
+            let Some(&v) = metrics.get(c.metric) else {
+                continue;
+            };
+            if v < c.threshold {
+                continue;
+            }
+            // Interpolated from the previous row when it was below and after since_s.
+            let t = match &self.previous {
+                Some((t0, m0)) if *t0 >= c.since_s => match m0.get(c.metric) {
+                    Some(&v0) if v0 < c.threshold && v > v0 => {
+                        t0 + (c.threshold - v0) / (v - v0) * (time_s - t0)
+                    }
+                    _ => time_s,
+                },
+                _ => time_s,
+            };
+            self.found.insert(c.name.to_string(), t - c.since_s);
+        }
+        self.previous = Some((time_s, metrics.clone()));
+    }
+    pub fn found(&self) -> &BTreeMap<String, f64> {
+        &self.found
+    }
+}
+
 /// See [`Experiment::yield_stress_guess_pa`].
 pub fn yield_stress_guess_pa(m: &Manifest, metric: &str, value: f64) -> Option<f64> {
     with_experiment!(&m.scene, e => e.yield_stress_guess_pa(m, metric, value))

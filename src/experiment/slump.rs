@@ -191,6 +191,17 @@ impl Experiment for Slump {
         "spread_diameter_m"
     }
 
+    /// t500 (EN 12350-8, EFNARC): the time from the start of the lift until the spread
+    /// diameter reaches 500 mm.
+    fn crossings(&self, _m: &Manifest) -> Vec<super::Crossing> {
+        vec![super::Crossing {
+            name: "t500_s",
+            metric: "spread_diameter_m",
+            threshold: 0.5,
+            since_s: self.lift_start_s,
+        }]
+    }
+
     /// The pancake law inverted for the cone's volume: tau_0 = 225 rho g V^2 / (128 pi^2 R^5).
     fn yield_stress_guess_pa(&self, m: &Manifest, metric: &str, value: f64) -> Option<f64> {
         let radius_m = match metric {

@@ -3,7 +3,7 @@
 use super::RunError;
 use super::frames::{cloud, diagnostics, time_ns};
 use crate::checkpoint;
-use crate::experiment::{Manifest, experiment_metrics};
+use crate::experiment::{CrossingTracker, Manifest, experiment_metrics};
 use crate::mps::{ParticleKind, Solver, StepError};
 use crate::proto::foxglove::PointCloud;
 use crate::proto::mps::v1::{CheckpointHash, Diagnostics, StateCheckpoint, Summary};
@@ -93,6 +93,9 @@ pub struct LoopStart {
     pub checkpoints: Vec<CheckpointHash>,
     /// Step of the last checkpoint already logged, if it holds the solver's current state.
     pub last_checkpoint_step: Option<u64>,
+    /// The diagnostics rows already logged up to the restored time (time, experiment
+    /// metrics): they give the crossings found so far (see [`crate::experiment::Crossing`]).
+    pub logged_rows: Vec<(f64, BTreeMap<String, f64>)>,
 }
 
 /// What may stop the loop besides the experiment's own end and stop conditions.
@@ -113,9 +116,8 @@ pub struct LoopControl {
 pub struct LoopEnd {
     pub outcome: Outcome,
     pub summary: Summary,
-    /// Why a completed run stopped before `time.end_s` (a stop condition), else empty. Not
-    /// recorded: the summary's reason is for failures and interrupts; a stop shows in
-    /// `stop_time_s` and the last diagnostics row.
+    /// Why a completed run stopped before `time.end_s` (a stop condition), else empty;
+    /// recorded as `Summary.stop`.
     pub stop_reason: String,
 }
 
@@ -143,6 +145,10 @@ pub fn time_loop<const D: usize>(
     let mut cloud_schedule = schedule(m.output.cloud_interval_s);
     let mut checkpoint_schedule = schedule(m.output.checkpoint_interval_s);
     let mut progress_schedule = schedule(end_s / 10.0);
+    let mut crossings = CrossingTracker::new(m);
+    for (t, metrics) in &start.logged_rows {
+        crossings.row(*t, metrics);
+    }
     let mut checkpoints: Vec<CheckpointHash> = start.checkpoints;
     let mut last_checkpoint_step: Option<u64> = start.last_checkpoint_step;
     let mut outcome = Outcome::Completed;
@@ -163,8 +169,16 @@ pub fn time_loop<const D: usize>(
 
     loop {
         let t = solver.time_s;
-        if diag_schedule.due(t) && frames {
-            sink.diagnostics(time_ns(t), &diagnostics(m, solver, dt_s, report.as_ref()))?;
+        if diag_schedule.due(t) {
+            if frames {
+                let row = diagnostics(m, solver, dt_s, report.as_ref());
+                if !crossings.is_empty() {
+                    crossings.row(t, &row.metrics.clone().into_iter().collect());
+                }
+                sink.diagnostics(time_ns(t), &row)?;
+            } else if !crossings.is_empty() {
+                crossings.row(t, &experiment_metrics(m, &solver.particles, t));
+            }
         }
         if cloud_schedule.due(t) && frames {
             sink.cloud(time_ns(t), &cloud(solver))?;
@@ -277,6 +291,9 @@ pub fn time_loop<const D: usize>(
     metrics.insert("steps".into(), solver.step as f64);
     metrics.insert("simulated_time_s".into(), solver.time_s);
     metrics.insert("stop_time_s".into(), solver.time_s);
+    for (name, t) in crossings.found() {
+        metrics.insert(name.clone(), *t);
+    }
     let summary = Summary {
         outcome: outcome.as_str().to_string(),
         reason: outcome.reason().to_string(),

@@ -93,6 +93,13 @@ pub enum RunError {
     Record(#[from] RecordError),
 }
 
+/// A logged diagnostics row as (time, experiment metrics), for [`LoopStart::logged_rows`].
+pub fn logged_row(
+    d: &crate::proto::mps::v1::Diagnostics,
+) -> (f64, std::collections::BTreeMap<String, f64>) {
+    (d.time_s, d.metrics.clone().into_iter().collect())
+}
+
 /// File name of a run: `<name>-<first 12 hex of the experiment hash>.mcap`.
 pub fn output_path(out_dir: &Path, resolved: &Resolved) -> PathBuf {
     out_dir.join(format!(

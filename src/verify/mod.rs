@@ -400,6 +400,12 @@ fn compare_summaries(
                 compare::full(*a),
                 compare::full(*b)
             )),
+            (None, Some(b)) if crate::experiment::LATER_METRICS.contains(&k.as_str()) => {
+                notes.push(format!(
+                    "summary metric {k}: not in the file (written before this build recorded it); the replay gives {}",
+                    compare::full(*b)
+                ))
+            }
             (a, b) => out.push(format!("summary metric {k}: logged {a:?}, replayed {b:?}")),
         }
     }
@@ -499,6 +505,12 @@ fn replay<const D: usize>(
                     .map(crate::checkpoint::hash_entry)
                     .collect(),
                 last_checkpoint_step: Some(from.step),
+                logged_rows: run
+                    .diagnostics
+                    .iter()
+                    .filter(|d| d.time_s <= from.time_s)
+                    .map(crate::run::logged_row)
+                    .collect(),
             };
             (solver, start)
         }
