@@ -8,8 +8,8 @@
 //! measured value, stepping by a factor of 2 towards it, then narrow the bracket: each round
 //! takes the secant estimate in log-log space (a power law is a straight line there, e.g.
 //! the pancake law R ~ tau^(-1/5)) and bisects the larger remaining part for the other runs.
-//! It stops when a run is within the tolerance of the measured value and runs on both sides
-//! of it bound the fitted value. The rounds depend on
+//! It stops when the runs on both sides of the measured value are both within the tolerance
+//! of it, so that the bracket they form is the fit's uncertainty. The rounds depend on
 //! the manifest only (not on the machine's cores), so a calibration gives the same runs and
 //! the same result everywhere; every run is an ordinary recorded run in the calibration's
 //! folder, named by its experiment hash and reused when it is already there.
@@ -439,8 +439,13 @@ fn search(
         let within = fit
             .best
             .is_some_and(|b| (b.1 - target).abs() <= plan.tolerance);
-        // Done when a run is within the tolerance and runs on both sides bound the value.
-        if within && fit.bracket.is_some() {
+        // Done when the runs on both sides of the measured value are within the tolerance of
+        // it: every value in the bracket then gives it within the tolerance (for a monotone
+        // response), so the bracket is the fit's uncertainty.
+        let tight = fit.bracket.is_some_and(|b| {
+            (b[0].1 - target).abs() <= plan.tolerance && (b[1].1 - target).abs() <= plan.tolerance
+        });
+        if tight {
             fit.converged = true;
             return Ok(());
         }
