@@ -584,11 +584,7 @@ fn run_round(
                 .map(|f| f.to_string_lossy().into_owned())
                 .unwrap_or_default(),
             experiment_sha256: r.hash_hex.clone(),
-            start: match start {
-                PointStart::Ran => "ran",
-                PointStart::Existing => "existing",
-                PointStart::Resumed => "resumed",
-            },
+            start: start.as_str(),
         });
     }
     Ok(out)

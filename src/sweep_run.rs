@@ -45,6 +45,17 @@ pub enum PointStart {
     Resumed,
 }
 
+impl PointStart {
+    /// `ran`, `existing` or `resumed` (as recorded in a calibration's record).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            PointStart::Ran => "ran",
+            PointStart::Existing => "existing",
+            PointStart::Resumed => "resumed",
+        }
+    }
+}
+
 /// How one point ended.
 #[derive(Debug)]
 pub struct PointOutcome {

@@ -197,7 +197,8 @@ pub const LATER_METRICS: &[&str] = &["t500_s"];
 #[derive(Debug, Clone, Default)]
 pub struct CrossingTracker {
     crossings: Vec<Crossing>,
-    previous: Option<(f64, BTreeMap<String, f64>)>,
+    /// The previous row's time and the value of each crossing's metric there.
+    previous: Option<(f64, Vec<Option<f64>>)>,
     found: BTreeMap<String, f64>,
 }
 
@@ -211,13 +212,14 @@ impl CrossingTracker {
     pub fn is_empty(&self) -> bool {
         self.crossings.is_empty()
     }
-    /// One diagnostics row: its time and experiment metrics.
-    pub fn row(&mut self, time_s: f64, metrics: &BTreeMap<String, f64>) {
-        for c in &self.crossings {
+    /// One diagnostics row: its time and a lookup of its experiment metrics.
+    pub fn row(&mut self, time_s: f64, metric: impl Fn(&str) -> Option<f64>) {
+        let values: Vec<Option<f64>> = self.crossings.iter().map(|c| metric(c.metric)).collect();
+        for (k, c) in self.crossings.iter().enumerate() {
             if self.found.contains_key(c.name) || time_s < c.since_s {
                 continue;
             }
-            let Some(&v) = metrics.get(c.metric) else {
+            let Some(v) = values[k] else {
                 continue;
             };
             if v < c.threshold {
@@ -225,8 +227,8 @@ impl CrossingTracker {
             }
             // Interpolated from the previous row when it was below and after since_s.
             let t = match &self.previous {
-                Some((t0, m0)) if *t0 >= c.since_s => match m0.get(c.metric) {
-                    Some(&v0) if v0 < c.threshold && v > v0 => {
+                Some((t0, v0)) if *t0 >= c.since_s => match v0[k] {
+                    Some(v0) if v0 < c.threshold && v > v0 => {
                         t0 + (c.threshold - v0) / (v - v0) * (time_s - t0)
                     }
                     _ => time_s,
@@ -235,7 +237,7 @@ impl CrossingTracker {
             };
             self.found.insert(c.name.to_string(), t - c.since_s);
         }
-        self.previous = Some((time_s, metrics.clone()));
+        self.previous = Some((time_s, values));
     }
     pub fn found(&self) -> &BTreeMap<String, f64> {
         &self.found

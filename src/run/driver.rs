@@ -147,7 +147,7 @@ pub fn time_loop<const D: usize>(
     let mut progress_schedule = schedule(end_s / 10.0);
     let mut crossings = CrossingTracker::new(m);
     for (t, metrics) in &start.logged_rows {
-        crossings.row(*t, metrics);
+        crossings.row(*t, |k| metrics.get(k).copied());
     }
     let mut checkpoints: Vec<CheckpointHash> = start.checkpoints;
     let mut last_checkpoint_step: Option<u64> = start.last_checkpoint_step;
@@ -172,12 +172,11 @@ pub fn time_loop<const D: usize>(
         if diag_schedule.due(t) {
             if frames {
                 let row = diagnostics(m, solver, dt_s, report.as_ref());
-                if !crossings.is_empty() {
-                    crossings.row(t, &row.metrics.clone().into_iter().collect());
-                }
+                crossings.row(t, |k| row.metrics.get(k).copied());
                 sink.diagnostics(time_ns(t), &row)?;
             } else if !crossings.is_empty() {
-                crossings.row(t, &experiment_metrics(m, &solver.particles, t));
+                let metrics = experiment_metrics(m, &solver.particles, t);
+                crossings.row(t, |k| metrics.get(k).copied());
             }
         }
         if cloud_schedule.due(t) && frames {
