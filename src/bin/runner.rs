@@ -198,8 +198,9 @@ enum Command {
         #[arg(long)]
         out: Option<PathBuf>,
     },
-    /// Slump-flow runs: the surface h(r) of the last checkpoint against the closed form
-    /// (Roussel & Coussot 2005), printed as a table and drawn (SVG).
+    /// Slump-flow and L-B box runs: the free surface of the last checkpoint against its closed
+    /// form (slump: h(r), Roussel & Coussot 2005; L-box, no spheres: h(x), Nguyen, Roussel &
+    /// Coussot 2006), printed as a table and drawn (SVG).
     Profile {
         run: PathBuf,
         /// Output file (default: <run>-profile.svg beside the run).

@@ -187,16 +187,13 @@ pub fn apply<const D: usize>(m: &Manifest, scene: &mut Scene<D>) {
 
     // Cells that already hold a wall or dummy particle (the test's walls, earlier solids)
     // are not filled twice.
-    let mut taken: BTreeSet<Vec<u64>> = (0..p.len())
-        .filter(|&i| p.kind[i] != ParticleKind::Fluid)
-        .map(|i| key(&p.position_m[i]))
-        .collect();
+    let mut taken = taken_cells(p);
     for solid in &obstacles {
-        fill(p, solid, spacing_m, walls, dummies, &mut taken);
+        fill_solid(p, solid, spacing_m, walls, dummies, &mut taken);
     }
     for (solid, path) in bodies.iter().zip(paths) {
         let first = p.len();
-        fill(p, solid, spacing_m, walls, dummies, &mut taken);
+        fill_solid(p, solid, spacing_m, walls, dummies, &mut taken);
         scene.bodies.push(RigidBody {
             first,
             end: p.len(),
@@ -214,9 +211,17 @@ fn key<const D: usize>(x: &Vector<D>) -> Vec<u64> {
     x.iter().map(|v| v.to_bits()).collect()
 }
 
+/// The cells that hold a wall or dummy particle of `p` (see [`fill_solid`]).
+pub fn taken_cells<const D: usize>(p: &Particles<D>) -> BTreeSet<Vec<u64>> {
+    (0..p.len())
+        .filter(|&i| p.kind[i] != ParticleKind::Fluid)
+        .map(|i| key(&p.position_m[i]))
+        .collect()
+}
+
 /// Fills `solid` with wall and dummy layers, leaving out cells in `taken` (and adding the
 /// new ones to it).
-fn fill<const D: usize>(
+pub fn fill_solid<const D: usize>(
     p: &mut Particles<D>,
     solid: &Shape<D>,
     spacing_m: f64,

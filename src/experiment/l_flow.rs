@@ -1,7 +1,7 @@
 //! L-flow test box (seed 000; JSCE/EFNARC-like L-box): a vertical part holding the concrete
 //! and a horizontal channel it flows into once the gate is opened at t = 0. In 3D the box has
 //! a depth along y.
-use super::geometry::container::add_walls;
+use super::geometry::container::{add_walls, l_box_parts};
 use super::geometry::lattice::{cells, centre, for_each_index};
 use super::{Experiment, Manifest, Scene};
 use crate::manifest::validate::{Checker, POSITIVE, fmt_num};
@@ -108,36 +108,21 @@ impl Experiment for LFlow {
     }
 }
 
-/// Cells along axis 0 (the channel), the last axis (vertical) and, in 3D, axis 1 (depth).
-fn extent<const D: usize>(p: &LFlow, spacing_m: f64, along: i64, vertical: i64) -> [i64; D] {
-    std::array::from_fn(|a| {
-        if a == 0 {
-            along
-        } else if a == D - 1 {
-            vertical
-        } else {
-            cells(p.depth_m, spacing_m)
-        }
-    })
-}
-
-/// The vertical part and the channel as lattice boxes (low and high cell indices).
 type CellBox<const D: usize> = ([i64; D], [i64; D]);
 
 fn parts<const D: usize>(p: &LFlow, spacing_m: f64) -> (CellBox<D>, CellBox<D>) {
-    let n = |x: f64| cells(x, spacing_m);
-    let (width, length) = (
-        n(p.vertical_width_m),
-        n(p.vertical_width_m + p.channel_length_m),
-    );
-    (
-        ([0; D], extent(p, spacing_m, width, n(p.vertical_height_m))),
-        ([0; D], extent(p, spacing_m, length, n(p.channel_height_m))),
+    l_box_parts::<D>(
+        p.vertical_width_m,
+        p.vertical_height_m,
+        p.channel_length_m,
+        p.channel_height_m,
+        p.depth_m,
+        spacing_m,
     )
 }
 
 /// Beyond one box size away from the L, fluid becomes a ghost.
-fn domain<const D: usize>(
+pub(super) fn domain<const D: usize>(
     vertical_part: CellBox<D>,
     channel: CellBox<D>,
     spacing_m: f64,
@@ -153,9 +138,9 @@ pub fn build<const D: usize>(
     dummy_layers: u32,
 ) -> Scene<D> {
     let (vertical_part, channel) = parts::<D>(p, spacing_m);
-    let width = vertical_part.1[0];
     let mut particles = Particles::<D>::default();
-    let fill = extent(p, spacing_m, width, cells(p.fill_height_m, spacing_m));
+    let mut fill = vertical_part.1;
+    fill[D - 1] = cells(p.fill_height_m, spacing_m);
     for_each_index([0; D], fill, |idx| {
         particles.push(centre(idx, spacing_m), ParticleKind::Fluid)
     });

@@ -123,6 +123,7 @@ experiments! {$
     LFlow(l_flow::LFlow) = "l_flow",
     Slump(slump::Slump) = "slump",
     Rodding(rodding::Rodding) = "rodding",
+    LbBox(lb_box::LbBox) = "lb_box",
 }
 
 impl SceneSection for SceneSpec {

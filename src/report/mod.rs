@@ -483,38 +483,142 @@ pub fn snapshot(
 
 pub use crate::experiment::slump::{ProfilePoint, SlumpProfile};
 
-/// Profile of the last checkpoint of a slump-flow run.
-pub fn slump_profile(run: &RunFile) -> Result<SlumpProfile> {
+/// The run's manifest and its last checkpoint's particles (3D).
+fn last_state_3d(run: &RunFile) -> Result<(crate::experiment::Resolved, Particles3, f64)> {
     let resolved = crate::restore::manifest_of(run)
         .map_err(|e| ReportError::Input(format!("the run's manifest: {e}")))?;
-    let m = &resolved.manifest;
-    let crate::experiment::SceneSpec::Slump(spec) = &m.scene else {
-        return Err(ReportError::Input(format!(
-            "run `{}` is not a slump-flow run (scene.kind slump)",
-            m.name
-        )));
-    };
     let state = run
         .states
         .last()
         .ok_or_else(|| ReportError::Input("the run has no checkpoint".into()))?;
     let particles = crate::checkpoint::particles_from_message::<3>(state)
         .map_err(|e| ReportError::Input(format!("last checkpoint: {e}")))?;
-    spec.profile(m, &particles, state.time_s)
+    Ok((resolved, particles, state.time_s))
+}
+
+type Particles3 = crate::mps::Particles<3>;
+
+/// Profile of the last checkpoint of a slump-flow run.
+pub fn slump_profile(run: &RunFile) -> Result<SlumpProfile> {
+    let (resolved, particles, time_s) = last_state_3d(run)?;
+    let m = &resolved.manifest;
+    let crate::experiment::SceneSpec::Slump(spec) = &m.scene else {
+        return Err(not_profiled(&m.name));
+    };
+    spec.profile(m, &particles, time_s)
         .map_err(ReportError::Input)
 }
 
-/// `runner profile`: the slump profile as a table (returned) and an SVG plot (default
-/// `<run>-profile.svg` beside the run file) with the closed form for the measured radius and
-/// for the closed-form radius.
+fn not_profiled(name: &str) -> ReportError {
+    ReportError::Input(format!(
+        "run `{name}` is neither a slump-flow run (scene.kind slump) nor an L-B box run (scene.kind lb_box)"
+    ))
+}
+
+/// Profile of the last checkpoint of an L-B box (or L-box) run.
+pub fn lb_profile(run: &RunFile) -> Result<crate::experiment::lb_box::LbProfile> {
+    let (resolved, particles, time_s) = last_state_3d(run)?;
+    let m = &resolved.manifest;
+    let crate::experiment::SceneSpec::LbBox(spec) = &m.scene else {
+        return Err(not_profiled(&m.name));
+    };
+    spec.profile(m, &particles, time_s)
+        .map_err(ReportError::Input)
+}
+
+/// `runner profile`: the surface at rest of a slump-flow or an L-B box run against its
+/// closed form, as a table (returned) and an SVG plot (default `<run>-profile.svg`).
 pub fn profile(mcap: &Path, out: Option<&Path>) -> Result<(PathBuf, String)> {
-    use crate::experiment::slump::closed_form_height_m;
     let run = read(mcap)?;
-    let p = slump_profile(&run)?;
+    let out = out.map_or_else(|| beside(mcap, "-profile.svg"), Path::to_path_buf);
+    match canonical_manifest(&run)
+        .as_ref()
+        .and_then(|v| v.get("scene"))
+        .and_then(|v| v.get("kind"))
+        .and_then(|v| v.as_str())
+    {
+        Some("lb_box") => lb_box_profile(&run, out),
+        _ => slump_profile_plot(&run, out),
+    }
+}
+
+/// The L-B box surface h(x) along the box against the L-box closed form (no spheres).
+fn lb_box_profile(run: &RunFile, out: PathBuf) -> Result<(PathBuf, String)> {
+    use crate::experiment::lb_box::closed_form_height_m;
+    let p = lb_profile(run)?;
+    let closed = p.closed_form_front_m.is_finite();
+    let mut table = format!(
+        "{} at t = {:.3} s (spacing {} m, W = {} m, k = tau_0/(rho g) = {:.3} mm): front at x = {:.4} m, filling distance {:.4} m",
+        run_title(run),
+        p.time_s,
+        p.spacing_m,
+        p.width_m,
+        1000.0 * p.k_m,
+        p.front_m,
+        p.front_m - p.gate_x_m
+    );
+    if closed {
+        table += &format!(
+            "; closed form for this volume {:.4} m ({:+.1} %)",
+            p.closed_form_front_m - p.gate_x_m,
+            100.0 * ((p.front_m - p.gate_x_m) / (p.closed_form_front_m - p.gate_x_m) - 1.0)
+        );
+    }
+    table += "\nx_m       d_m       h_measured_m  h_closed_form_m  difference_m\n";
+    for q in &p.points {
+        table += &format!(
+            "{:<9.4} {:<9.4} {:<13.4} {:<16.4} {:+.4}\n",
+            q.x_m,
+            q.d_m,
+            q.measured_m,
+            q.closed_form_m,
+            q.measured_m - q.closed_form_m
+        );
+    }
+    let mut series = vec![Series {
+        label: "MPS surface (top particle + l0/2)".into(),
+        points: p.points.iter().map(|q| (q.x_m, q.measured_m)).collect(),
+    }];
+    if closed {
+        let fine = |front: f64| -> Vec<(f64, f64)> {
+            (0..=400)
+                .map(|k| front * f64::from(k) / 400.0)
+                .map(|x| (x, closed_form_height_m(p.k_m, p.width_m, front - x)))
+                .collect()
+        };
+        series.push(Series {
+            label: format!("L-box closed form, measured front x = {:.3} m", p.front_m),
+            points: fine(p.front_m),
+        });
+        series.push(Series {
+            label: format!(
+                "L-box closed form for the volume, front x = {:.3} m",
+                p.closed_form_front_m
+            ),
+            points: fine(p.closed_form_front_m),
+        });
+    }
+    let title = format!("{}: surface at t = {:.2} s", run_title(run), p.time_s);
+    plot::line_plot(
+        &out,
+        &title,
+        "x from the back wall [m]",
+        "h [m]",
+        &series,
+        false,
+    )?;
+    Ok((out, table))
+}
+
+/// The slump profile as a table (returned) and an SVG plot with the closed form for the
+/// measured radius and for the closed-form radius.
+fn slump_profile_plot(run: &RunFile, out: PathBuf) -> Result<(PathBuf, String)> {
+    use crate::experiment::slump::closed_form_height_m;
+    let p = slump_profile(run)?;
     let (rho, g, tau) = (p.density_kg_m3, p.gravity_m_s2, p.yield_stress_pa);
     let mut table = format!(
         "{} at t = {:.3} s (spacing {} m): spread radius {:.4} m (diameter {:.1} mm), closed form {:.4} m ({:+.1} %)\n",
-        run_title(&run),
+        run_title(run),
         p.time_s,
         p.spacing_m,
         p.radius_m,
@@ -552,8 +656,7 @@ pub fn profile(mcap: &Path, out: Option<&Path>) -> Result<(PathBuf, String)> {
             points: fine(p.closed_form_radius_m),
         },
     ];
-    let out = out.map_or_else(|| beside(mcap, "-profile.svg"), Path::to_path_buf);
-    let title = format!("{}: surface at t = {:.2} s", run_title(&run), p.time_s);
+    let title = format!("{}: surface at t = {:.2} s", run_title(run), p.time_s);
     plot::line_plot(&out, &title, "r [m]", "h [m]", &series, false)?;
     Ok((out, table))
 }

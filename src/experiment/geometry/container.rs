@@ -4,6 +4,46 @@ use super::shapes::{Shape, fill_walls};
 use crate::mps::{Particles, Vector};
 
 pub use super::lattice::CellBox;
+use super::lattice::cells;
+
+/// The two boxes of an L-shaped container as lattice boxes: the vertical part (x up to
+/// `vertical_width_m`, height `vertical_height_m`) and the horizontal part (x up to
+/// `vertical_width_m + channel_length_m`, height `channel_height_m`), both from the origin;
+/// axis 0 along the box, the last axis up and, in 3D, axis 1 across it (`depth_m`).
+pub fn l_box_parts<const D: usize>(
+    vertical_width_m: f64,
+    vertical_height_m: f64,
+    channel_length_m: f64,
+    channel_height_m: f64,
+    depth_m: f64,
+    spacing_m: f64,
+) -> (CellBox<D>, CellBox<D>) {
+    let n = |x: f64| cells(x, spacing_m);
+    let extent = |along: i64, vertical: i64| -> [i64; D] {
+        std::array::from_fn(|a| {
+            if a == 0 {
+                along
+            } else if a == D - 1 {
+                vertical
+            } else {
+                n(depth_m)
+            }
+        })
+    };
+    (
+        (
+            [0; D],
+            extent(n(vertical_width_m), n(vertical_height_m)),
+        ),
+        (
+            [0; D],
+            extent(
+                n(vertical_width_m + channel_length_m),
+                n(channel_height_m),
+            ),
+        ),
+    )
+}
 
 /// Adds the wall particles of a container whose inside is the union of `interior` boxes:
 /// every cell within `wall_layers + dummy_layers` cells of the inside (Chebyshev distance, the
