@@ -73,6 +73,23 @@ struct RunArgs {
 
 #[derive(Subcommand, Debug)]
 enum Command {
+    /// Draw the particle set a manifest starts from (walls, dummies, fluid, inlets) as
+    /// sections, SVG: in 3D through y = AT_Y from the side and through z = AT_Z from above,
+    /// in 2D the plane; prints the files written.
+    Draw {
+        manifest: PathBuf,
+        #[arg(long = "set", value_name = "KEY=VALUE")]
+        set: Vec<String>,
+        /// 3D: the side section's plane y, metres (default: the middle of the scene).
+        #[arg(long, value_name = "M")]
+        at_y: Option<f64>,
+        /// 3D: the top section's plane z, metres (default: a quarter of the way up the scene).
+        #[arg(long, value_name = "M")]
+        at_z: Option<f64>,
+        /// Folder for the SVG files (<name>-scene-side.svg, <name>-scene-top.svg).
+        #[arg(long, default_value = ".")]
+        out: PathBuf,
+    },
     /// Print the SHA-256 experiment hash of a manifest (after --set overrides).
     Hash {
         manifest: PathBuf,
@@ -234,9 +251,10 @@ struct VerifyArgs {
     #[arg(long = "x", value_name = "KEY", default_value = mps_runner::verify::trend::DEFAULT_X)]
     x_key: String,
     /// Summary metric on the y axis of --trend [default: the test's own, e.g. l_flow_value_m
-    /// for the L-flow, spread_diameter_m for the slump].
+    /// for the L-flow, spread_diameter_m for the slump, filling_distance_m for the L-B box].
+    /// Repeatable: each metric is checked, and all must fall.
     #[arg(long = "y", value_name = "METRIC")]
-    y_metric: Option<String>,
+    y_metric: Vec<String>,
 }
 
 /// Most worker threads `--threads` gives: twice the cores, and at least 8 (so that thread
@@ -269,6 +287,13 @@ fn threads_arg(text: &str) -> Result<usize, String> {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     match cli.command {
+        Some(Command::Draw {
+            manifest,
+            set,
+            at_y,
+            at_z,
+            out,
+        }) => draw_command(&manifest, &set, at_y, at_z, &out),
         Some(Command::Hash {
             manifest: path,
             set,
@@ -706,23 +731,35 @@ fn verify_command(args: VerifyArgs) -> ExitCode {
         return ExitCode::from(EXIT_BAD_INPUT);
     }
     if let Some(dir) = args.trend {
-        let options = TrendOptions {
-            x_key: args.x_key,
-            y_metric: args.y_metric,
+        let metrics: Vec<Option<String>> = if args.y_metric.is_empty() {
+            vec![None]
+        } else {
+            args.y_metric.into_iter().map(Some).collect()
         };
-        return match trend(&dir, &options) {
-            Ok(report) => {
-                println!("{report}");
-                if report.passed() {
-                    ExitCode::SUCCESS
-                } else {
-                    ExitCode::from(EXIT_MISMATCH)
+        let mut all_passed = true;
+        for (k, y_metric) in metrics.into_iter().enumerate() {
+            let options = TrendOptions {
+                x_key: args.x_key.clone(),
+                y_metric,
+            };
+            match trend(&dir, &options) {
+                Ok(report) => {
+                    if k > 0 {
+                        println!();
+                    }
+                    println!("{report}");
+                    all_passed &= report.passed();
+                }
+                Err(e) => {
+                    eprintln!("error: {e}");
+                    return ExitCode::from(EXIT_BAD_INPUT);
                 }
             }
-            Err(e) => {
-                eprintln!("error: {e}");
-                ExitCode::from(EXIT_BAD_INPUT)
-            }
+        }
+        return if all_passed {
+            ExitCode::SUCCESS
+        } else {
+            ExitCode::from(EXIT_MISMATCH)
         };
     }
     let file = args.file.expect("clap requires FILE without --trend");
@@ -826,6 +863,52 @@ fn resume_command(file: &std::path::Path, threads: Option<usize>, quiet: bool) -
 }
 
 /// Prints the plot's path, or the error with its exit code.
+fn draw_command(
+    path: &Path,
+    set: &[String],
+    at_y: Option<f64>,
+    at_z: Option<f64>,
+    out: &Path,
+) -> ExitCode {
+    let resolved = match experiment::load(path, set) {
+        Ok(r) => r,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return ExitCode::from(EXIT_BAD_INPUT);
+        }
+    };
+    let m = &resolved.manifest;
+    let estimate = experiment::estimate_particles(m);
+    if estimate > DEFAULT_MAX_PARTICLES as f64 {
+        eprintln!(
+            "error: the scene holds about {estimate:.3e} particles, more than {DEFAULT_MAX_PARTICLES}: too many to draw"
+        );
+        return ExitCode::from(EXIT_BAD_INPUT);
+    }
+    for (name, v) in [("--at-y", at_y), ("--at-z", at_z)] {
+        if v.is_some_and(|v| !v.is_finite()) {
+            eprintln!("error: {name} must be a finite number");
+            return ExitCode::from(EXIT_BAD_INPUT);
+        }
+    }
+    match report::draw_scene(m, at_y, at_z, out) {
+        Ok(paths) => {
+            for p in paths {
+                println!("{}", p.display());
+            }
+            ExitCode::SUCCESS
+        }
+        Err(e @ report::ReportError::Write { .. }) => {
+            eprintln!("error: {e}");
+            ExitCode::from(EXIT_INTERNAL)
+        }
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::from(EXIT_BAD_INPUT)
+        }
+    }
+}
+
 fn report_result(result: Result<PathBuf, report::ReportError>) -> ExitCode {
     match result {
         Ok(path) => {

@@ -660,3 +660,96 @@ fn slump_profile_plot(run: &RunFile, out: PathBuf) -> Result<(PathBuf, String)> 
     plot::line_plot(&out, &title, "r [m]", "h [m]", &series, false)?;
     Ok((out, table))
 }
+
+/// `runner draw`: the particle set at t = 0 of a manifest (walls, dummies, fluid, and each
+/// inlet's cross-section as `inlet`) as sections: in 3D one through the plane y = `at_y_m`
+/// seen from the side and one through z = `at_z_m` seen from above (each the one layer of
+/// lattice cells nearest the plane; defaults: the middle of the particles' y range and a
+/// quarter of the way up their z range), in 2D the plane itself. Files
+/// `<name>-scene-{side,top}.svg` (3D) or `<name>-scene.svg` (2D) in `out_dir`.
+pub fn draw_scene(
+    m: &crate::experiment::Manifest,
+    at_y_m: Option<f64>,
+    at_z_m: Option<f64>,
+    out_dir: &Path,
+) -> Result<Vec<PathBuf>> {
+    match m.dimension {
+        3 => draw_scene_d::<3>(m, at_y_m, at_z_m, out_dir),
+        _ => draw_scene_d::<2>(m, at_y_m, at_z_m, out_dir),
+    }
+}
+
+/// The `kind` value `runner draw` gives inlet points (after the particle kinds 0-3).
+const INLET_KIND: f32 = 4.0;
+
+fn draw_scene_d<const D: usize>(
+    m: &crate::experiment::Manifest,
+    at_y_m: Option<f64>,
+    at_z_m: Option<f64>,
+    out_dir: &Path,
+) -> Result<Vec<PathBuf>> {
+    let l0 = m.spacing_m;
+    let scene = crate::experiment::build_scene::<D>(m);
+    let p = &scene.particles;
+    let mut points: Vec<([f64; 3], f32)> = (0..p.len())
+        .map(|i| {
+            let x = p.position_m[i];
+            ([x[0], x[1], if D == 3 { x[2] } else { 0.0 }], p.kind[i] as u32 as f32)
+        })
+        .collect();
+    for inlet in &scene.inlets {
+        for x in inlet.cross_section_m(l0) {
+            points.push(([x[0], x[1], if D == 3 { x[2] } else { 0.0 }], INLET_KIND));
+        }
+    }
+    std::fs::create_dir_all(out_dir).map_err(|e| ReportError::Write {
+        path: out_dir.to_path_buf(),
+        message: e.to_string(),
+    })?;
+    let frame_of = |keep: &dyn Fn(&[f64; 3], f32) -> bool| {
+        let mut f = cloud::Frame::default();
+        let mut kind = Vec::new();
+        for (x, k) in points.iter().filter(|(x, k)| keep(x, *k)) {
+            f.x.push(x[0] as f32);
+            f.y.push(x[1] as f32);
+            f.z.push(x[2] as f32);
+            kind.push(*k);
+        }
+        f.fields.insert("kind".into(), kind);
+        f
+    };
+    let title = |what: &str| format!("{} (scene.kind {}, spacing {} m): {what}", m.name, m.scene.kind_name(), l0);
+    if D == 2 {
+        let out = out_dir.join(format!("{}-scene.svg", m.name));
+        plot::snapshot_plot(&out, &title("t = 0"), &frame_of(&|_, _| true), "kind", plot::View::Plane)?;
+        return Ok(vec![out]);
+    }
+    // The cell-centre plane nearest a coordinate: ((floor(c / l0)) + 1/2) l0.
+    let snap = |c: f64| ((c / l0).floor() + 0.5) * l0;
+    let range = |a: usize| {
+        points.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), (x, _)| {
+            (lo.min(x[a]), hi.max(x[a]))
+        })
+    };
+    let (y0, y1) = range(1);
+    let (z0, z1) = range(2);
+    let at_y = snap(at_y_m.unwrap_or(0.5 * (y0 + y1)));
+    let at_z = snap(at_z_m.unwrap_or(z0 + 0.25 * (z1 - z0)));
+    let side = out_dir.join(format!("{}-scene-side.svg", m.name));
+    plot::snapshot_plot(
+        &side,
+        &title(&format!("section y = {at_y:.4} m, from the side (inlets projected)")),
+        &frame_of(&|x, k| k == INLET_KIND || (x[1] - at_y).abs() < 0.5 * l0),
+        "kind",
+        plot::View::Side,
+    )?;
+    let top = out_dir.join(format!("{}-scene-top.svg", m.name));
+    plot::snapshot_plot(
+        &top,
+        &title(&format!("section z = {at_z:.4} m, from above (inlets projected)")),
+        &frame_of(&|x, k| k == INLET_KIND || (x[2] - at_z).abs() < 0.5 * l0),
+        "kind",
+        plot::View::Plane,
+    )?;
+    Ok(vec![side, top])
+}

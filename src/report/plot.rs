@@ -339,6 +339,7 @@ fn category_label(field: &str, value: i64) -> String {
         ("kind", 1) => "wall".into(),
         ("kind", 2) => "dummy".into(),
         ("kind", 3) => "ghost".into(),
+        ("kind", 4) => "inlet".into(),
         ("flowing", 0) => "not flowing".into(),
         ("flowing", 1) => "flowing".into(),
         (f, v) => format!("{f} = {v}"),

@@ -1,0 +1,183 @@
+//! L-B box, 3D (seed 004, section 3): the scene, its checks, the pour (volume, nothing lost,
+//! replay from the start and from mid-pour) and, without spheres, the L-box surface at rest
+//! against the closed form of Nguyen, Roussel & Coussot (2006), at coarse spacings.
+mod common;
+use mps_runner::experiment::lb_box::{self, LbBox};
+use mps_runner::experiment::{SceneSpec, build_scene};
+use mps_runner::mps::ParticleKind;
+
+fn spec(m: &mps_runner::experiment::Manifest) -> &LbBox {
+    match &m.scene {
+        SceneSpec::LbBox(b) => b,
+        other => panic!("not an L-B box: {other:?}"),
+    }
+}
+
+#[test]
+fn scene_geometry() {
+    let l0 = 0.025;
+    let m = common::resolve("lb_box_3d.yaml", &["spacing_m=0.025"]).manifest;
+    let b = spec(&m);
+    let scene = build_scene::<3>(&m);
+    let p = &scene.particles;
+    assert_eq!(p.fluid_count(), 0, "the box starts empty");
+    let layers = f64::from(m.mps.wall_layers + m.mps.dummy_layers);
+    let r = 0.5 * b.sphere_diameter_m;
+    let (length, width) = (b.vertical_width_m + b.channel_length_m, b.width_m);
+    let mut in_spheres = 0u32;
+    for i in 0..p.len() {
+        let x = p.position_m[i];
+        assert_ne!(p.kind[i], ParticleKind::Fluid);
+        let inside_box = x[0] > 0.0 && x[0] < length && x[1] > 0.0 && x[1] < width && x[2] > 0.0;
+        if inside_box && (x[2] < b.channel_height_m || x[0] < b.vertical_width_m) {
+            // Inside the box: only sphere particles, within the layers below the surface.
+            let depth = b
+                .sphere_centres_m
+                .iter()
+                .map(|c| r - ((x[0] - c[0]).powi(2) + (x[1] - c[1]).powi(2) + (x[2] - c[2]).powi(2)).sqrt())
+                .fold(f64::NEG_INFINITY, f64::max);
+            assert!(depth > 0.0 && depth <= layers * l0 + 1e-12, "{x:?} depth {depth}");
+            in_spheres += 1;
+        }
+    }
+    // The shells of `layers` layers: their volume (4 pi/3)(r^3 - (r - layers l0)^3) each, up
+    // to half a spacing times their surface where the lattice cuts it.
+    let inner = (r - layers * l0).max(0.0);
+    let shells_m3 = 4.0 * 4.0 / 3.0 * std::f64::consts::PI * (r.powi(3) - inner.powi(3));
+    let surface_m2 = 4.0 * 4.0 * std::f64::consts::PI * r * r;
+    let cells_m3 = f64::from(in_spheres) * l0.powi(3);
+    assert!(
+        (cells_m3 - shells_m3).abs() < 0.5 * l0 * surface_m2,
+        "{in_spheres} cells: {cells_m3} m^3 vs {shells_m3}"
+    );
+    // One inlet of 13 L over the vertical part, pouring down.
+    let inlet = &scene.inlets[0];
+    assert_eq!(inlet.total_count(l0), (0.013 / (l0 * l0 * l0)).round() as u64);
+    for x in inlet.cross_section_m(l0) {
+        assert!(x[0] > 0.0 && x[0] < b.vertical_width_m && x[2] == b.inlet_height_m);
+    }
+    assert_eq!(inlet.unit_direction()[2], -1.0);
+}
+
+#[test]
+fn bad_sections_are_named() {
+    let cases = [
+        ("dimension=2", "dimension"),
+        ("scene.inlet_x_m=0.19", "scene.inlet_x_m"),
+        ("scene.inlet_height_m=0.2", "scene.inlet_height_m"),
+        ("scene.filling_height_m=0.3", "scene.filling_height_m"),
+        ("scene.sphere_diameter_m=0.3", "scene.sphere_centres_m.0"),
+        ("scene.sphere_centres_m.3.0=1.55", "scene.sphere_centres_m.3"),
+        ("scene.channel_height_m=0.6", "scene.channel_height_m"),
+        ("scene.pour_volume_m3=0", "scene.pour_volume_m3"),
+        ("scene.inlet_diameter_m=0.005", "scene.inlet_diameter_m"),
+    ];
+    for (set, field) in cases {
+        let err = mps_runner::experiment::load(
+            &common::experiment("lb_box_3d.yaml"),
+            &[set.to_string()],
+        )
+        .expect_err(set)
+        .to_string();
+        assert!(err.contains(field), "{set}: {err}");
+    }
+}
+
+/// A coarse pour: the volume that entered is 13 L within one particle per lattice point of
+/// the inlet's cross-section (one layer), nothing is lost, and the run replays bit for bit
+/// from the start and from a checkpoint taken mid-pour.
+#[test]
+fn pour_volume_nothing_lost_and_replays_mid_pour() {
+    let l0 = 0.025;
+    let dir = tempfile::tempdir().unwrap();
+    let resolved = common::resolve(
+        "lb_box_3d.yaml",
+        &[
+            "spacing_m=0.025",
+            "time.end_s=5.5",
+            "time.dt_max_s=2e-3",
+            "output.checkpoint_interval_s=0.5",
+            "output.cloud_interval_s=0.5",
+        ],
+    );
+    let b = spec(&resolved.manifest).clone();
+    let result = common::run_completed(&resolved, dir.path(), 2);
+    let metrics = &result.summary.metrics;
+    let inlet = b.inlet::<3>(l0);
+    let layer = inlet.cross_section_m(l0).len() as f64;
+    let entered = inlet.total_count(l0) as f64;
+    // 13 L at 25 mm take 5.2 s through the 4 lattice points of the 60 mm inlet.
+    assert_eq!(metrics["fluid_particle_count"], entered, "{metrics:?}");
+    assert_eq!(metrics["ghost_particle_count"], 0.0);
+    let poured = metrics["poured_volume_m3"];
+    assert!(
+        (poured - b.pour_volume_m3).abs() <= layer * l0 * l0 * l0,
+        "poured {poured} m^3 vs {} (one layer = {} particles)",
+        b.pour_volume_m3,
+        layer
+    );
+    // Concrete has reached the spheres and fills part of their voids.
+    let rate = metrics["filling_rate"];
+    assert!(rate > 0.05 && rate < 1.05, "filling rate {rate}");
+    assert!(metrics["filling_distance_m"] > 0.2, "{metrics:?}");
+    // Checkpoint 4 is at t = 2 s, mid-pour.
+    common::assert_replays(&result.path, Some(4));
+    common::assert_replays(&result.path, None);
+}
+
+/// Without spheres the box is an L-box: at rest its free surface follows Nguyen, Roussel &
+/// Coussot (2006), x(h) = (W/(2k)) [h - (W/2) ln(1 + 2h/W)] back from the front, and the heap
+/// of the poured volume against the back wall ends at a closed-form distance.
+#[test]
+fn l_box_surface_at_rest_matches_the_closed_form() {
+    let l0 = 0.02;
+    let dir = tempfile::tempdir().unwrap();
+    let resolved = common::resolve(
+        "l_box_3d.yaml",
+        &[
+            "spacing_m=0.02",
+            "scene.inlet_diameter_m=0.08",
+            "output.cloud_interval_s=5",
+        ],
+    );
+    let m = resolved.manifest.clone();
+    let b = spec(&m).clone();
+    let result = common::run_completed(&resolved, dir.path(), 2);
+    let metrics = &result.summary.metrics;
+    assert!(
+        result.summary.stop.starts_with("settled"),
+        "{}",
+        result.summary.stop
+    );
+    let k = 42.4 / (2337.0 * 9.81);
+    let w = b.width_m;
+    let distance = metrics["filling_distance_m"];
+    let closed = metrics["closed_form_filling_distance_m"];
+    assert_eq!(
+        closed,
+        lb_box::heap_length_m(k, w, metrics["poured_volume_m3"]) - b.vertical_width_m
+    );
+    // The discrete surface cannot resolve the part of the heap thinner than about two
+    // spacings (surface particles carry no pressure): that part's closed-form length is the
+    // allowance short of the front, l0 beyond it.
+    let thin = lb_box::closed_form_distance_m(k, w, 2.0 * l0);
+    println!(
+        "front {distance:.4} m, closed form {closed:.4} m, allowance -{thin:.4} / +{l0} m"
+    );
+    assert!(
+        distance > closed - thin && distance < closed + l0,
+        "filling distance {distance} vs closed form {closed}"
+    );
+    // The surface back from the front: within 1.5 l0 of h(d) at 25, 50 and 75 % of the
+    // distance (the top particle plus l0/2 over the width's particles stands up to about a
+    // spacing high).
+    for share in ["x25", "x50", "x75"] {
+        let measured = metrics[&format!("surface_height_{share}_m")];
+        let expected = metrics[&format!("closed_form_height_{share}_m")];
+        println!("{share}: h {measured:.4} m, closed form {expected:.4} m");
+        assert!(
+            (measured - expected).abs() < 1.5 * l0,
+            "{share}: {measured} vs {expected}"
+        );
+    }
+}
