@@ -891,28 +891,20 @@ fn draw_command(
             return ExitCode::from(EXIT_BAD_INPUT);
         }
     }
-    match report::draw_scene(m, at_y, at_z, out) {
-        Ok(paths) => {
-            for p in paths {
-                println!("{}", p.display());
-            }
-            ExitCode::SUCCESS
-        }
-        Err(e @ report::ReportError::Write { .. }) => {
-            eprintln!("error: {e}");
-            ExitCode::from(EXIT_INTERNAL)
-        }
-        Err(e) => {
-            eprintln!("error: {e}");
-            ExitCode::from(EXIT_BAD_INPUT)
-        }
-    }
+    report_results(report::draw_scene(m, at_y, at_z, out))
 }
 
 fn report_result(result: Result<PathBuf, report::ReportError>) -> ExitCode {
+    report_results(result.map(|p| vec![p]))
+}
+
+/// Prints the files written (exit 0), or the error: exit 1 when writing failed, 2 else.
+fn report_results(result: Result<Vec<PathBuf>, report::ReportError>) -> ExitCode {
     match result {
-        Ok(path) => {
-            println!("{}", path.display());
+        Ok(paths) => {
+            for path in paths {
+                println!("{}", path.display());
+            }
             ExitCode::SUCCESS
         }
         Err(e @ report::ReportError::Write { .. }) => {

@@ -497,15 +497,29 @@ pub fn closed_form_height_m(k_m: f64, width_m: f64, d_m: f64) -> f64 {
     if d_m <= 0.0 {
         return 0.0;
     }
-    // h <= sqrt(2 k d) (the 2D heap, no side walls), an upper bound to start from.
-    let mut hi = (2.0 * k_m * d_m).sqrt();
+    // h >= sqrt(2 k d) (the 2D heap: side walls only make it steeper) to start from.
+    solve_increasing(
+        |h| closed_form_distance_m(k_m, width_m, h),
+        d_m,
+        (2.0 * k_m * d_m).sqrt(),
+    )
+}
+
+/// The h >= 0 where the increasing f (f(0) = 0) reaches `target`: an upper bound by doubling
+/// `start`, then bisection to the last bit; a fixed sequence of operations, so the same bits
+/// everywhere.
+fn solve_increasing(f: impl Fn(f64) -> f64, target: f64, start: f64) -> f64 {
+    let mut hi = start.max(f64::MIN_POSITIVE);
+    while f(hi) < target && hi < f64::MAX / 4.0 {
+        hi *= 2.0;
+    }
     let mut lo = 0.0;
-    for _ in 0..200 {
+    for _ in 0..2100 {
         let mid = 0.5 * (lo + hi);
         if mid <= lo || mid >= hi {
             break;
         }
-        if closed_form_distance_m(k_m, width_m, mid) < d_m {
+        if f(mid) < target {
             lo = mid;
         } else {
             hi = mid;
@@ -531,25 +545,10 @@ pub fn heap_length_m(k_m: f64, width_m: f64, volume_m3: f64) -> f64 {
         return 0.0;
     }
     let area = volume_m3 / width_m;
-    // A(H) >= H^3/(3k) * W/(W + 2H) >= ..., so H = (3 k A)^(1/3) is a lower bound; grow an
-    // upper one by doubling.
-    let mut hi = libm::cbrt(3.0 * k_m * area).max(f64::MIN_POSITIVE);
-    while closed_form_area_m2(k_m, width_m, hi) < area {
-        hi *= 2.0;
-    }
-    let mut lo = 0.0;
-    for _ in 0..200 {
-        let mid = 0.5 * (lo + hi);
-        if mid <= lo || mid >= hi {
-            break;
-        }
-        if closed_form_area_m2(k_m, width_m, mid) < area {
-            lo = mid;
-        } else {
-            hi = mid;
-        }
-    }
-    closed_form_distance_m(k_m, width_m, 0.5 * (lo + hi))
+    // From the height of the heap without side walls, A = H^3/(3k).
+    let start = libm::cbrt(3.0 * k_m * area);
+    let h = solve_increasing(|h| closed_form_area_m2(k_m, width_m, h), area, start);
+    closed_form_distance_m(k_m, width_m, h)
 }
 
 /// One station of an L-box surface profile.
