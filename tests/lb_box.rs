@@ -168,15 +168,23 @@ fn l_box_surface_at_rest_matches_the_closed_form() {
         distance > closed - thin && distance < closed + l0,
         "filling distance {distance} vs closed form {closed}"
     );
-    // The surface back from the front: within 1.5 l0 of h(d) at 25, 50 and 75 % of the
-    // distance (the top particle plus l0/2 over the width's particles stands up to about a
-    // spacing high).
+    // The surface back from the measured front: within l0 of h(d) at 25, 50 and 75 % of the
+    // distance (the discrete surface, the top particle plus l0/2, is known to l0/2, and the
+    // highest across the width stands up to l0/2 above the mean). Measured when set: +0.48,
+    // +0.27 and +0.14 l0 at 20 mm; a yield stress twice too large would put the x25 station
+    // about 1.5 l0 above h(d).
     for share in ["x25", "x50", "x75"] {
         let measured = metrics[&format!("surface_height_{share}_m")];
         let expected = metrics[&format!("closed_form_height_{share}_m")];
+        let d = distance * (1.0 - share[1..].parse::<f64>().unwrap() / 100.0);
+        let at_d = lb_box::closed_form_height_m(k, w, d);
+        assert!(
+            (expected - at_d).abs() < 1e-9,
+            "{share}: the summary's closed form {expected} is h(d) = {at_d} at d back from the front"
+        );
         println!("{share}: h {measured:.4} m, closed form {expected:.4} m");
         assert!(
-            (measured - expected).abs() < 1.5 * l0,
+            (measured - expected).abs() < l0,
             "{share}: {measured} vs {expected}"
         );
     }

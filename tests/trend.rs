@@ -128,3 +128,66 @@ fn one_point_or_no_runs_cannot_be_checked() {
     assert_eq!(code, 1, "{text}");
     assert!(text.contains("fewer than two values"), "{text}");
 }
+
+/// A finished run file with the given yield stress and summary metrics (an L-B box sweep
+/// point).
+fn fake_lb_run(dir: &Path, n: usize, yield_pa: f64, metrics: &[(&str, f64)]) {
+    let canonical = format!(
+        r#"{{"dimension":3,"fluid":{{"model":"bi_viscosity","yield_stress_pa":{yield_pa}}},"name":"lb_{n}","scene":{{"kind":"lb_box"}}}}"#
+    );
+    let hash = format!("{n:064x}");
+    let header = RunHeader {
+        manifest_source: &canonical,
+        overrides: &[],
+        canonical: &canonical,
+        experiment_sha256: &hash,
+        name: "lb",
+        threads: 1,
+    };
+    let rec = Recorder::create(&dir.join(format!("lb-{n}.mcap")), &header).unwrap();
+    let summary = Summary {
+        metrics: metrics.iter().map(|(k, v)| (k.to_string(), *v)).collect(),
+        ..Summary::default()
+    };
+    rec.finish(0, &summary, &Outcome::Completed).unwrap();
+}
+
+/// `--y` repeats: every metric named must fall (the L-B box's filling distance and filling
+/// rate); one that rises fails the check even when the other falls.
+#[test]
+fn several_metrics_must_all_fall() {
+    let run = |rate_falls: bool| {
+        let dir = tempfile::tempdir().unwrap();
+        for (n, tau) in [20.0, 40.0, 80.0].into_iter().enumerate() {
+            let rate = if rate_falls { 1.0 - tau / 100.0 } else { tau / 100.0 };
+            fake_lb_run(
+                dir.path(),
+                n,
+                tau,
+                &[("filling_distance_m", 1.0 / tau), ("filling_rate", rate)],
+            );
+        }
+        let out = Command::cargo_bin("runner")
+            .unwrap()
+            .args(["verify", "--trend"])
+            .arg(dir.path())
+            .args(["--y", "filling_distance_m", "--y", "filling_rate"])
+            .output()
+            .unwrap();
+        let text = String::from_utf8_lossy(&out.stdout).to_string();
+        (out.status.code().unwrap(), text)
+    };
+    let (code, text) = run(true);
+    assert_eq!(code, 0, "{text}");
+    assert!(text.contains("filling_distance_m") && text.contains("filling_rate"), "{text}");
+    let (code, text) = run(false);
+    assert_eq!(code, 1, "{text}");
+    // Without --y the test's own metric is checked: the filling distance.
+    let dir = tempfile::tempdir().unwrap();
+    for (n, tau) in [20.0, 40.0].into_iter().enumerate() {
+        fake_lb_run(dir.path(), n, tau, &[("filling_distance_m", 1.0 / tau)]);
+    }
+    let (code, text) = cli(dir.path());
+    assert_eq!(code, 0, "{text}");
+    assert!(text.contains("filling_distance_m"), "{text}");
+}
