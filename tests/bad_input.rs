@@ -89,7 +89,7 @@ const CASES: &[(&[&str], &str)] = &[
         &["--set", "stop.non_flowing_fraction=0.9"],
         "needs a yield-stress fluid",
     ),
-    (&["--set", "scene.kind=lb_box"], "lb_box"),
+    (&["--set", "scene.kind=v_funnel"], "v_funnel"),
     (
         &["--set", "scene.column_height_m=0.04"],
         "scene.column_height_m: must be >= 2 * spacing_m",

@@ -848,8 +848,8 @@ fn variant_can_be_selected_by_override() {
     };
     assert_eq!(tank_width_m, 2.0);
     // an unknown variant is an error naming the valid ones
-    let e = err_with(MINIMAL, &["scene.kind=lb_box", "scene.gate_height_m=0.1"]);
-    assert_override(&e, "scene.kind", &["lb_box", "dam_break"]);
+    let e = err_with(MINIMAL, &["scene.kind=v_funnel", "scene.gate_height_m=0.1"]);
+    assert_override(&e, "scene.kind", &["v_funnel", "dam_break", "lb_box"]);
 }
 
 #[test]
