@@ -34,9 +34,15 @@ fn scene_geometry() {
             let depth = b
                 .sphere_centres_m
                 .iter()
-                .map(|c| r - ((x[0] - c[0]).powi(2) + (x[1] - c[1]).powi(2) + (x[2] - c[2]).powi(2)).sqrt())
+                .map(|c| {
+                    r - ((x[0] - c[0]).powi(2) + (x[1] - c[1]).powi(2) + (x[2] - c[2]).powi(2))
+                        .sqrt()
+                })
                 .fold(f64::NEG_INFINITY, f64::max);
-            assert!(depth > 0.0 && depth <= layers * l0 + 1e-12, "{x:?} depth {depth}");
+            assert!(
+                depth > 0.0 && depth <= layers * l0 + 1e-12,
+                "{x:?} depth {depth}"
+            );
             in_spheres += 1;
         }
     }
@@ -52,7 +58,10 @@ fn scene_geometry() {
     );
     // One inlet of 13 L over the vertical part, pouring down.
     let inlet = &scene.inlets[0];
-    assert_eq!(inlet.total_count(l0), (0.013 / (l0 * l0 * l0)).round() as u64);
+    assert_eq!(
+        inlet.total_count(l0),
+        (0.013 / (l0 * l0 * l0)).round() as u64
+    );
     for x in inlet.cross_section_m(l0) {
         assert!(x[0] > 0.0 && x[0] < b.vertical_width_m && x[2] == b.inlet_height_m);
     }
@@ -67,18 +76,19 @@ fn bad_sections_are_named() {
         ("scene.inlet_height_m=0.2", "scene.inlet_height_m"),
         ("scene.filling_height_m=0.3", "scene.filling_height_m"),
         ("scene.sphere_diameter_m=0.3", "scene.sphere_centres_m.0"),
-        ("scene.sphere_centres_m.3.0=1.55", "scene.sphere_centres_m.3"),
+        (
+            "scene.sphere_centres_m.3.0=1.55",
+            "scene.sphere_centres_m.3",
+        ),
         ("scene.channel_height_m=0.6", "scene.channel_height_m"),
         ("scene.pour_volume_m3=0", "scene.pour_volume_m3"),
         ("scene.inlet_diameter_m=0.005", "scene.inlet_diameter_m"),
     ];
     for (set, field) in cases {
-        let err = mps_runner::experiment::load(
-            &common::experiment("lb_box_3d.yaml"),
-            &[set.to_string()],
-        )
-        .expect_err(set)
-        .to_string();
+        let err =
+            mps_runner::experiment::load(&common::experiment("lb_box_3d.yaml"), &[set.to_string()])
+                .expect_err(set)
+                .to_string();
         assert!(err.contains(field), "{set}: {err}");
     }
 }
@@ -161,9 +171,7 @@ fn l_box_surface_at_rest_matches_the_closed_form() {
     // spacings (surface particles carry no pressure): that part's closed-form length is the
     // allowance short of the front, l0 beyond it.
     let thin = lb_box::closed_form_distance_m(k, w, 2.0 * l0);
-    println!(
-        "front {distance:.4} m, closed form {closed:.4} m, allowance -{thin:.4} / +{l0} m"
-    );
+    println!("front {distance:.4} m, closed form {closed:.4} m, allowance -{thin:.4} / +{l0} m");
     assert!(
         distance > closed - thin && distance < closed + l0,
         "filling distance {distance} vs closed form {closed}"

@@ -159,7 +159,11 @@ fn several_metrics_must_all_fall() {
     let run = |rate_falls: bool| {
         let dir = tempfile::tempdir().unwrap();
         for (n, tau) in [20.0, 40.0, 80.0].into_iter().enumerate() {
-            let rate = if rate_falls { 1.0 - tau / 100.0 } else { tau / 100.0 };
+            let rate = if rate_falls {
+                1.0 - tau / 100.0
+            } else {
+                tau / 100.0
+            };
             fake_lb_run(
                 dir.path(),
                 n,
@@ -179,7 +183,10 @@ fn several_metrics_must_all_fall() {
     };
     let (code, text) = run(true);
     assert_eq!(code, 0, "{text}");
-    assert!(text.contains("filling_distance_m") && text.contains("filling_rate"), "{text}");
+    assert!(
+        text.contains("filling_distance_m") && text.contains("filling_rate"),
+        "{text}"
+    );
     let (code, text) = run(false);
     assert_eq!(code, 1, "{text}");
     // Without --y the test's own metric is checked: the filling distance.

@@ -11,7 +11,7 @@
 //! The spheres are static solids of wall and dummy layers; the inlet is a disc in the plane
 //! z = `inlet_height_m` pouring downwards.
 use super::boundaries::{fill_solid, taken_cells};
-use super::geometry::container::{add_walls, l_box_parts};
+use super::geometry::container::{CellBox, add_walls, l_box_parts};
 use super::geometry::lattice::cells;
 use super::geometry::shapes::Shape;
 use super::{Experiment, Manifest, Scene, yield_stress_pa};
@@ -371,7 +371,7 @@ impl LbBox {
     fn parts<const D: usize>(
         &self,
         spacing_m: f64,
-    ) -> (([i64; D], [i64; D]), ([i64; D], [i64; D])) {
+    ) -> (CellBox<D>, CellBox<D>) {
         l_box_parts::<D>(
             self.vertical_width_m,
             self.vertical_height_m,

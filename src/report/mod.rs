@@ -694,7 +694,10 @@ fn draw_scene_d<const D: usize>(
     let mut points: Vec<([f64; 3], f32)> = (0..p.len())
         .map(|i| {
             let x = p.position_m[i];
-            ([x[0], x[1], if D == 3 { x[2] } else { 0.0 }], p.kind[i] as u32 as f32)
+            (
+                [x[0], x[1], if D == 3 { x[2] } else { 0.0 }],
+                p.kind[i] as u32 as f32,
+            )
         })
         .collect();
     for inlet in &scene.inlets {
@@ -718,18 +721,33 @@ fn draw_scene_d<const D: usize>(
         f.fields.insert("kind".into(), kind);
         f
     };
-    let title = |what: &str| format!("{} (scene.kind {}, spacing {} m): {what}", m.name, m.scene.kind_name(), l0);
+    let title = |what: &str| {
+        format!(
+            "{} (scene.kind {}, spacing {} m): {what}",
+            m.name,
+            m.scene.kind_name(),
+            l0
+        )
+    };
     if D == 2 {
         let out = out_dir.join(format!("{}-scene.svg", m.name));
-        plot::snapshot_plot(&out, &title("t = 0"), &frame_of(&|_, _| true), "kind", plot::View::Plane)?;
+        plot::snapshot_plot(
+            &out,
+            &title("t = 0"),
+            &frame_of(&|_, _| true),
+            "kind",
+            plot::View::Plane,
+        )?;
         return Ok(vec![out]);
     }
     // The cell-centre plane nearest a coordinate: ((floor(c / l0)) + 1/2) l0.
     let snap = |c: f64| ((c / l0).floor() + 0.5) * l0;
     let range = |a: usize| {
-        points.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), (x, _)| {
-            (lo.min(x[a]), hi.max(x[a]))
-        })
+        points
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), (x, _)| {
+                (lo.min(x[a]), hi.max(x[a]))
+            })
     };
     let (y0, y1) = range(1);
     let (z0, z1) = range(2);
@@ -738,7 +756,9 @@ fn draw_scene_d<const D: usize>(
     let side = out_dir.join(format!("{}-scene-side.svg", m.name));
     plot::snapshot_plot(
         &side,
-        &title(&format!("section y = {at_y:.4} m, from the side (inlets projected)")),
+        &title(&format!(
+            "section y = {at_y:.4} m, from the side (inlets projected)"
+        )),
         &frame_of(&|x, k| k == INLET_KIND || (x[1] - at_y).abs() < 0.5 * l0),
         "kind",
         plot::View::Side,
@@ -746,7 +766,9 @@ fn draw_scene_d<const D: usize>(
     let top = out_dir.join(format!("{}-scene-top.svg", m.name));
     plot::snapshot_plot(
         &top,
-        &title(&format!("section z = {at_z:.4} m, from above (inlets projected)")),
+        &title(&format!(
+            "section z = {at_z:.4} m, from above (inlets projected)"
+        )),
         &frame_of(&|x, k| k == INLET_KIND || (x[2] - at_z).abs() < 0.5 * l0),
         "kind",
         plot::View::Plane,

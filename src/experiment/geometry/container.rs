@@ -31,16 +31,10 @@ pub fn l_box_parts<const D: usize>(
         })
     };
     (
+        ([0; D], extent(n(vertical_width_m), n(vertical_height_m))),
         (
             [0; D],
-            extent(n(vertical_width_m), n(vertical_height_m)),
-        ),
-        (
-            [0; D],
-            extent(
-                n(vertical_width_m + channel_length_m),
-                n(channel_height_m),
-            ),
+            extent(n(vertical_width_m + channel_length_m), n(channel_height_m)),
         ),
     )
 }
