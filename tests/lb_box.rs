@@ -156,7 +156,11 @@ fn l_box_surface_approaches_the_closed_form() {
     let b = spec(&m).clone();
     let result = common::run_completed(&resolved, dir.path(), 2);
     let metrics = &result.summary.metrics;
-    assert_eq!(metrics["simulated_time_s"], m.time.end_s, "{}", result.summary.stop);
+    assert_eq!(
+        metrics["simulated_time_s"], m.time.end_s,
+        "{}",
+        result.summary.stop
+    );
     let k = 42.4 / (2337.0 * 9.81);
     let w = b.width_m;
     let distance = metrics["filling_distance_m"];

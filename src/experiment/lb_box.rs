@@ -86,15 +86,7 @@ const SURFACE_SHARES: [(&str, f64); 3] = [("x25", 0.25), ("x50", 0.5), ("x75", 0
 
 impl Experiment for LbBox {
     fn check(&self, m: &Manifest, c: &mut Checker) {
-        if m.dimension != 3 {
-            c.fail(
-                "dimension",
-                format!(
-                    "scene.kind lb_box is a 3D test (a circular inlet, spheres): dimension must be 3, got {}",
-                    m.dimension
-                ),
-            );
-        }
+        super::require_3d(m, c, "lb_box", "a circular inlet, spheres");
         let dims = [
             ("scene.vertical_width_m", self.vertical_width_m),
             ("scene.vertical_height_m", self.vertical_height_m),

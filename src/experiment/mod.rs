@@ -410,6 +410,19 @@ pub fn yield_stress_pa(fluid: &Fluid) -> f64 {
     }
 }
 
+/// Fails `dimension` unless the manifest is 3D: `kind` names the test, `why` says why.
+pub fn require_3d(m: &Manifest, c: &mut Checker, kind: &str, why: &str) {
+    if m.dimension != 3 {
+        c.fail(
+            "dimension",
+            format!(
+                "scene.kind {kind} is a 3D test ({why}): dimension must be 3, got {}",
+                m.dimension
+            ),
+        );
+    }
+}
+
 /// Whether the manifest's spacing passed its own check (scene checks that compare lengths
 /// with it skip otherwise).
 pub fn spacing_ok(m: &Manifest) -> bool {

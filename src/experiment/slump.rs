@@ -60,15 +60,7 @@ impl Default for Slump {
 
 impl Experiment for Slump {
     fn check(&self, m: &Manifest, c: &mut Checker) {
-        if m.dimension != 3 {
-            c.fail(
-                "dimension",
-                format!(
-                    "scene.kind slump is a 3D test (an axisymmetric cone): dimension must be 3, got {}",
-                    m.dimension
-                ),
-            );
-        }
+        super::require_3d(m, c, "slump", "an axisymmetric cone");
         let dims = [
             ("scene.cone_height_m", self.cone_height_m),
             ("scene.cone_bottom_diameter_m", self.cone_bottom_diameter_m),
