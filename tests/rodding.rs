@@ -259,6 +259,11 @@ fn bad_rodding_sections_are_refused_naming_the_field() {
             "scene.rod_width_m: must be >= 2 * spacing_m",
         ),
         (&["scene.start_s=-1"], "scene.start_s"),
+        // Found by the mutation test: keyframe times that no longer increase at 1e308 s.
+        (
+            &["scene.start_s=1e308"],
+            "scene.start_s: the rod's path cannot be built",
+        ),
     ];
     let mut failures = Vec::new();
     for (sets, fragment) in cases {
