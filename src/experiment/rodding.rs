@@ -184,20 +184,6 @@ impl Experiment for Rodding {
         if !ok || !super::spacing_ok(m) {
             return;
         }
-        // The path the scene builds must be one the core accepts: a start far beyond the
-        // strokes' durations (1e308 s) leaves keyframe times that no longer increase.
-        let (times, points, _) = self.keyframes();
-        let offsets: Vec<Vector<2>> = points
-            .iter()
-            .map(|p| Vector::<2>::new(p[0] - points[0][0], p[1] - points[0][1]))
-            .collect();
-        if let Err(message) = Path::from_keyframes(&times, &offsets, None) {
-            c.fail(
-                "scene.start_s",
-                format!("the rod's path cannot be built from these values: {message}"),
-            );
-            return;
-        }
         let l0 = m.spacing_m;
         if self.fill_height_m > self.form_height_m {
             c.fail(
@@ -267,6 +253,22 @@ impl Experiment for Rodding {
             ],
             l0,
         );
+        // Once all else holds, the path the scene builds must be one the core accepts: a
+        // start far beyond the strokes' durations (1e308 s) leaves keyframe times that no
+        // longer increase.
+        if c.is_clean() {
+            let (times, points, _) = self.keyframes();
+            let offsets: Vec<Vector<2>> = points
+                .iter()
+                .map(|p| Vector::<2>::new(p[0] - points[0][0], p[1] - points[0][1]))
+                .collect();
+            if let Err(message) = Path::from_keyframes(&times, &offsets, None) {
+                c.fail(
+                    "scene.start_s",
+                    format!("the rod's path cannot be built from these values: {message}"),
+                );
+            }
+        }
     }
 
     fn build<const D: usize>(&self, m: &Manifest) -> Scene<D> {
