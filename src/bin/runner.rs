@@ -878,11 +878,8 @@ fn draw_command(
         }
     };
     let m = &resolved.manifest;
-    let estimate = experiment::estimate_particles(m);
-    if estimate > DEFAULT_MAX_PARTICLES as f64 {
-        eprintln!(
-            "error: the scene holds about {estimate:.3e} particles, more than {DEFAULT_MAX_PARTICLES}: too many to draw"
-        );
+    if let Err(e) = mps_runner::run::check_size(m, DEFAULT_MAX_PARTICLES) {
+        eprintln!("error: {e}");
         return ExitCode::from(EXIT_BAD_INPUT);
     }
     for (name, v) in [("--at-y", at_y), ("--at-z", at_z)] {

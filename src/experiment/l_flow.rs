@@ -166,6 +166,5 @@ pub fn build<const D: usize>(
 /// furthest fluid particle (centre + l0/2); 0 while nothing has passed the gate.
 pub fn l_flow_value_m<const D: usize>(particles: &Particles<D>, p: &LFlow, spacing_m: f64) -> f64 {
     let gate_x_m = cells(p.vertical_width_m, spacing_m) as f64 * spacing_m;
-    let front = super::front_position_m(particles, spacing_m);
-    (front - gate_x_m).max(0.0)
+    super::front_past_m(particles, gate_x_m, spacing_m)
 }

@@ -297,18 +297,13 @@ impl Experiment for LbBox {
     ) {
         let l0 = m.spacing_m;
         let g = self.lattice(l0);
-        let fluid = particles.fluid_count();
-        let volume_m3 = fluid as f64 * cell_volume(l0, D);
+        let volume_m3 = particles.fluid_count() as f64 * cell_volume(l0, D);
         out.insert("poured_volume_m3".into(), volume_m3);
         let front_m = super::front_position_m(particles, l0);
-        let distance_m = if fluid == 0 {
-            0.0
-        } else {
-            (front_m - g.gate_x_m).max(0.0)
-        };
+        let distance_m = super::front_past_m(particles, g.gate_x_m, l0);
         out.insert("filling_distance_m".into(), distance_m);
-        for (name, share) in SURFACE_SHARES {
-            let x = g.gate_x_m + share * distance_m;
+        let stations = SURFACE_SHARES.map(|(name, share)| (name, g.gate_x_m + share * distance_m));
+        for (name, x) in stations {
             out.insert(
                 format!("surface_height_{name}_m"),
                 surface_height_m(particles, l0, x),
@@ -328,8 +323,7 @@ impl Experiment for LbBox {
             "closed_form_filling_distance_m".into(),
             (heap_m - g.gate_x_m).max(0.0),
         );
-        for (name, share) in SURFACE_SHARES {
-            let x = g.gate_x_m + share * distance_m;
+        for (name, x) in stations {
             out.insert(
                 format!("closed_form_height_{name}_m"),
                 closed_form_height_m(k_m, g.width_m, front_m - x),

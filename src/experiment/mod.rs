@@ -397,6 +397,12 @@ pub fn front_position_m<const D: usize>(particles: &Particles<D>, spacing_m: f64
     front + 0.5 * spacing_m
 }
 
+/// How far the front ([`front_position_m`]) lies past `x_m` (0 when it does not, or when
+/// there is no fluid): the L-flow value and the L-B box's filling distance.
+pub fn front_past_m<const D: usize>(particles: &Particles<D>, x_m: f64, spacing_m: f64) -> f64 {
+    (front_position_m(particles, spacing_m) - x_m).max(0.0)
+}
+
 /// Yield stress of the fluid (0 for a Newtonian one).
 pub fn yield_stress_pa(fluid: &Fluid) -> f64 {
     match *fluid {

@@ -109,23 +109,29 @@ pub fn output_path(out_dir: &Path, resolved: &Resolved) -> PathBuf {
     ))
 }
 
+/// Refuses a scene estimated ([`crate::experiment::estimate_particles`]) to hold more than
+/// `limit` particles, before anything is built.
+pub fn check_size(m: &crate::experiment::Manifest, limit: u64) -> Result<(), RunError> {
+    let particles = crate::experiment::estimate_particles(m);
+    if particles > limit as f64 {
+        // Measured peak memory per particle: 1.5 kB in 2D (dam break, 35 k and 49 k
+        // particles), 1.6 kB in 3D (slump, 35 k); 4 kB covers 3D scenes of more fluid.
+        let per_particle = if m.dimension == 3 { 4e3 } else { 1.5e3 };
+        return Err(RunError::TooLarge {
+            particles,
+            memory_gb: particles * per_particle / 1e9,
+            limit,
+        });
+    }
+    Ok(())
+}
+
 /// Runs the experiment and records it. A simulation that fails (blow-up, solver failure) or
 /// is interrupted still yields a finished MCAP file whose outcome says so: that is an `Ok`
 /// with a non-completed `outcome`. `Err` means the recording itself could not be made.
 pub fn run(resolved: &Resolved, options: &RunOptions) -> Result<RunResult, RunError> {
     if let Some(limit) = options.max_particles {
-        let m = &resolved.manifest;
-        let particles = crate::experiment::estimate_particles(m);
-        if particles > limit as f64 {
-            // Measured peak memory per particle: 1.5 kB in 2D (dam break, 35 k and 49 k
-            // particles), 1.6 kB in 3D (slump, 35 k); 4 kB covers 3D scenes of more fluid.
-            let per_particle = if m.dimension == 3 { 4e3 } else { 1.5e3 };
-            return Err(RunError::TooLarge {
-                particles,
-                memory_gb: particles * per_particle / 1e9,
-                limit,
-            });
-        }
+        check_size(&resolved.manifest, limit)?;
     }
     std::fs::create_dir_all(&options.out_dir).map_err(|source| RunError::OutDir {
         path: options.out_dir.clone(),
