@@ -89,6 +89,9 @@ enum Command {
         /// Folder for the SVG files (<name>-scene-side.svg, <name>-scene-top.svg).
         #[arg(long, default_value = ".")]
         out: PathBuf,
+        /// Refuse a scene estimated to hold more particles than this (before it is built).
+        #[arg(long, value_name = "N", default_value_t = DEFAULT_MAX_PARTICLES)]
+        max_particles: u64,
     },
     /// Print the SHA-256 experiment hash of a manifest (after --set overrides).
     Hash {
@@ -293,7 +296,8 @@ fn main() -> ExitCode {
             at_y,
             at_z,
             out,
-        }) => draw_command(&manifest, &set, at_y, at_z, &out),
+            max_particles,
+        }) => draw_command(&manifest, &set, at_y, at_z, &out, max_particles),
         Some(Command::Hash {
             manifest: path,
             set,
@@ -869,6 +873,7 @@ fn draw_command(
     at_y: Option<f64>,
     at_z: Option<f64>,
     out: &Path,
+    max_particles: u64,
 ) -> ExitCode {
     let resolved = match experiment::load(path, set) {
         Ok(r) => r,
@@ -878,7 +883,7 @@ fn draw_command(
         }
     };
     let m = &resolved.manifest;
-    if let Err(e) = mps_runner::run::check_size(m, DEFAULT_MAX_PARTICLES) {
+    if let Err(e) = mps_runner::run::check_size(m, max_particles) {
         eprintln!("error: {e}");
         return ExitCode::from(EXIT_BAD_INPUT);
     }
