@@ -1,18 +1,25 @@
-//! `runner calibrate`: back-calculate one manifest parameter (the yield stress) from a measured
-//! workability result (a slump-flow diameter, an L-flow value), as seed 004 section 2.1 does by
-//! "inverse calculation".
+//! `runner calibrate`: back-calculate manifest values (the yield stress, and optionally the
+//! plastic viscosity) from measured workability results (a slump-flow diameter and its t500
+//! time, an L-flow value), as seed 004 section 2.1 does by "inverse calculation".
 //!
-//! The search: a first guess from the test's closed form where it has one
+//! One fitted value: a first guess from the test's closed form where it has one
 //! ([`crate::experiment::Experiment::yield_stress_guess_pa`]), else the geometric mean of the
-//! bounds; rounds of `points_per_round` runs (run concurrently) that first bracket the
-//! measured value, stepping by a factor of 2 towards it, then narrow the bracket: each round
-//! takes the secant estimate in log-log space (a power law is a straight line there, e.g.
-//! the pancake law R ~ tau^(-1/5)) and bisects the larger remaining part for the other runs.
-//! It stops when the runs on both sides of the measured value are both within the tolerance
-//! of it, so that the bracket they form is the fit's uncertainty. The rounds depend on
-//! the manifest only (not on the machine's cores), so a calibration gives the same runs and
-//! the same result everywhere; every run is an ordinary recorded run in the calibration's
-//! folder, named by its experiment hash and reused when it is already there.
+//! bounds; rounds of `points_per_round` runs (run concurrently)
+//! that first bracket the measured value, stepping by a factor of 2 towards it, then narrow the
+//! bracket: each round takes the secant estimate in log-log space (a power law is a straight
+//! line there, e.g. the pancake law R ~ tau^(-1/5)) and bisects the larger remaining part for
+//! the other runs. It stops when the runs on both sides of the measured value are both within
+//! the tolerance of it, so that the bracket they form is the fit's uncertainty.
+//!
+//! Several fitted values (`pairs`: each from one measured metric): alternating one-value
+//! searches (block coordinate descent), each holding the others at their latest fitted
+//! values, in the order of `pairs`, until the two runs bracketing a stage's value meet every
+//! measured metric within its tolerance. A time metric's stage after the first starts from
+//! t ~ mu_p (the viscous time scale mu_p / (rho g H)): value * measured / simulated.
+//!
+//! The rounds depend on the manifest only (not on the machine's cores), so a calibration gives
+//! the same runs and the same result everywhere; every run is an ordinary recorded run in the
+//! calibration's folder, named by its experiment hash and reused when it is already there.
 use crate::experiment::{self, Resolved, SceneSpec};
 use crate::manifest::{self, ManifestError};
 use crate::record::Outcome;
@@ -22,7 +29,7 @@ use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-/// A calibration manifest (YAML). Example in `experiments/calibrate_slump.yaml`.
+/// A calibration manifest (YAML). Examples in `experiments/calibrations/`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Calibration {
@@ -33,22 +40,34 @@ pub struct Calibration {
     /// `KEY=VALUE` overrides applied to the base (as `--set`), e.g. a coarser spacing.
     #[serde(default)]
     pub set: Vec<String>,
-    /// The measured value of one summary metric, e.g. `{spread_diameter_m: 0.62}`.
+    /// The measured summary metrics, e.g. `{spread_diameter_m: 0.62, t500_s: 1.5}`.
     pub measured: BTreeMap<String, f64>,
-    /// How close a run's metric must come to the measured value (same unit).
+    /// How close a run's metric must come to each measured value (same unit).
     pub tolerance: BTreeMap<String, f64>,
-    /// The manifest value fitted and its bounds, e.g. `{fluid.yield_stress_pa: [10, 200]}`.
+    /// The manifest values fitted and their bounds, e.g. `{fluid.yield_stress_pa: [10, 200]}`.
     pub fit: BTreeMap<String, [f64; 2]>,
+    /// With more than one fitted value: which measured metric each is fitted from, in the
+    /// order the alternating search visits them (empty, and left out of the hash, for one).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub pairs: Vec<PairSpec>,
     /// Runs per round (run concurrently); part of the search, so fixed by the manifest.
     #[serde(default = "default_points_per_round")]
     pub points_per_round: u32,
-    /// The search gives up (exit 3) after this many runs.
+    /// The search gives up (exit 3) after this many runs (per spacing).
     #[serde(default = "default_max_evaluations")]
     pub max_evaluations: u32,
     /// A second spacing (m): the same fit there; the difference of the two fitted values is
     /// the spatial resolution's share of the uncertainty.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub check_spacing_m: Option<f64>,
+}
+
+/// One entry of `pairs`: the fitted value `fit` is fitted from the measured metric `from`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PairSpec {
+    pub fit: String,
+    pub from: String,
 }
 
 fn default_points_per_round() -> u32 {
@@ -72,22 +91,29 @@ pub enum CalibrateError {
     #[error("{0}")]
     OutOfBounds(String),
     #[error(
-        "no run came within the tolerance of the measured value in {0} runs (calibration.max_evaluations); the bracket reached is in calibration.json"
+        "the measured values were not all met within their tolerances in {0} runs (calibration.max_evaluations); the brackets reached are in calibration.json"
     )]
     NotConverged(u32),
 }
 
-/// The fitted quantities, checked and resolved.
+/// One fitted value with the measured metric it is fitted from, checked.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Pair {
+    pub parameter: String,
+    pub bounds: [f64; 2],
+    pub metric: String,
+    pub measured: f64,
+    pub tolerance: f64,
+}
+
+/// The calibration, checked and resolved.
 #[derive(Debug, Clone)]
 pub struct Plan {
     pub calibration: Calibration,
     /// The base manifest's path (resolved against the calibration file's folder).
     pub base_path: PathBuf,
-    pub metric: String,
-    pub target: f64,
-    pub tolerance: f64,
-    pub parameter: String,
-    pub bounds: [f64; 2],
+    /// In the order the search visits them.
+    pub pairs: Vec<Pair>,
     /// SHA-256 of the calibration's canonical JSON and the base experiment's hash.
     pub hash_hex: String,
     /// The base experiment with `set` applied (its test gives the first guess).
@@ -111,23 +137,67 @@ fn invalid(source: &str, text: &str, field: &str, message: String) -> ManifestEr
     }
 }
 
-/// The one entry of a single-entry map, or an error naming the field.
-fn single<'a, T>(
-    map: &'a BTreeMap<String, T>,
-    field: &str,
+/// The (fitted value, measured metric) pairs: implicit for one of each, else from `pairs`,
+/// which must use every fitted value and every measured metric exactly once.
+fn pairs_of(
+    c: &Calibration,
     bad: &dyn Fn(&str, String) -> ManifestError,
-) -> Result<(&'a String, &'a T), ManifestError> {
-    let mut it = map.iter();
-    match (it.next(), it.next()) {
-        (Some(entry), None) => Ok(entry),
-        _ => Err(bad(
-            field,
-            format!(
-                "must hold exactly one entry (one measured metric and one fitted value per calibration), got {}",
-                map.len()
-            ),
-        )),
+) -> Result<Vec<(String, String)>, ManifestError> {
+    if c.measured.is_empty() {
+        return Err(bad(
+            "measured",
+            "must give at least one measured metric".into(),
+        ));
     }
+    if c.fit.len() != c.measured.len() {
+        return Err(bad(
+            "fit",
+            format!(
+                "must hold as many fitted values as there are measured metrics (one fitted from each), got {} and {}",
+                c.fit.len(),
+                c.measured.len()
+            ),
+        ));
+    }
+    if c.fit.len() == 1 && c.pairs.is_empty() {
+        let p = c.fit.keys().next().expect("one");
+        let m = c.measured.keys().next().expect("one");
+        return Ok(vec![(p.clone(), m.clone())]);
+    }
+    if c.pairs.len() != c.fit.len() {
+        return Err(bad(
+            "pairs",
+            format!(
+                "must name, for each of the {} fitted values, the measured metric it is fitted from, e.g. `- {{fit: fluid.yield_stress_pa, from: spread_diameter_m}}`; got {} entries",
+                c.fit.len(),
+                c.pairs.len()
+            ),
+        ));
+    }
+    let mut out: Vec<(String, String)> = Vec::new();
+    for (i, p) in c.pairs.iter().enumerate() {
+        let field = format!("pairs[{i}]");
+        if !c.fit.contains_key(&p.fit) {
+            return Err(bad(&field, format!("fit {} is not a key of `fit`", p.fit)));
+        }
+        if !c.measured.contains_key(&p.from) {
+            return Err(bad(
+                &field,
+                format!("from {} is not a key of `measured`", p.from),
+            ));
+        }
+        if out.iter().any(|(f, m)| *f == p.fit || *m == p.from) {
+            return Err(bad(
+                &field,
+                format!(
+                    "{} or {} is already paired: each fitted value and each measured metric appears once",
+                    p.fit, p.from
+                ),
+            ));
+        }
+        out.push((p.fit.clone(), p.from.clone()));
+    }
+    Ok(out)
 }
 
 /// Reads and checks a calibration manifest and the base experiment it names.
@@ -140,37 +210,52 @@ pub fn load(path: &Path) -> Result<Plan, ManifestError> {
     let calibration: Calibration = serde_saphyr::from_str(&text)
         .map_err(|e| manifest::syntax_error::<SceneSpec>(&e, &source, &text))?;
     let bad = |field: &str, message: String| invalid(&source, &text, field, message);
-    let (metric, &target) = single(&calibration.measured, "measured", &bad)?;
-    let (parameter, &[lo, hi]) = single(&calibration.fit, "fit", &bad)?;
-    let tolerance = *calibration.tolerance.get(metric).ok_or_else(|| {
-        bad(
-            "tolerance",
-            format!("must give the tolerance of the measured metric {metric}"),
-        )
-    })?;
-    if calibration.tolerance.len() != 1 {
+    let named = pairs_of(&calibration, &bad)?;
+    if let Some(extra) = calibration
+        .tolerance
+        .keys()
+        .find(|k| !calibration.measured.contains_key(*k))
+    {
         return Err(bad(
-            "tolerance",
-            format!("must hold only the measured metric {metric}"),
+            &format!("tolerance.{extra}"),
+            "is not a measured metric: give a tolerance for each measured metric only".into(),
         ));
     }
-    if !(target.is_finite() && target > 0.0) {
-        return Err(bad(
-            &format!("measured.{metric}"),
-            format!("must be a finite number > 0, got {target}"),
-        ));
-    }
-    if !(tolerance.is_finite() && tolerance > 0.0 && tolerance < target) {
-        return Err(bad(
-            &format!("tolerance.{metric}"),
-            format!("must be > 0 and below the measured value {target}, got {tolerance}"),
-        ));
-    }
-    if !(lo.is_finite() && hi.is_finite() && 0.0 < lo && lo < hi) {
-        return Err(bad(
-            &format!("fit.{parameter}"),
-            format!("must be [min, max] with 0 < min < max, got [{lo}, {hi}]"),
-        ));
+    let mut pairs = Vec::new();
+    for (parameter, metric) in named {
+        let measured = calibration.measured[&metric];
+        let tolerance = *calibration.tolerance.get(&metric).ok_or_else(|| {
+            bad(
+                "tolerance",
+                format!("must give the tolerance of the measured metric {metric}"),
+            )
+        })?;
+        let [lo, hi] = calibration.fit[&parameter];
+        if !(measured.is_finite() && measured > 0.0) {
+            return Err(bad(
+                &format!("measured.{metric}"),
+                format!("must be a finite number > 0, got {measured}"),
+            ));
+        }
+        if !(tolerance.is_finite() && tolerance > 0.0 && tolerance < measured) {
+            return Err(bad(
+                &format!("tolerance.{metric}"),
+                format!("must be > 0 and below the measured value {measured}, got {tolerance}"),
+            ));
+        }
+        if !(lo.is_finite() && hi.is_finite() && 0.0 < lo && lo < hi) {
+            return Err(bad(
+                &format!("fit.{parameter}"),
+                format!("must be [min, max] with 0 < min < max, got [{lo}, {hi}]"),
+            ));
+        }
+        pairs.push(Pair {
+            parameter,
+            bounds: [lo, hi],
+            metric,
+            measured,
+            tolerance,
+        });
     }
     if !(1..=16).contains(&calibration.points_per_round) {
         return Err(bad(
@@ -196,10 +281,13 @@ pub fn load(path: &Path) -> Result<Plan, ManifestError> {
         .parent()
         .unwrap_or(Path::new("."))
         .join(&calibration.base);
-    // The base at both bounds must be a valid experiment (the parameter is a real field).
+    // The base at every bound must be a valid experiment (each fitted value is a real field).
     let base = experiment::load(&base_path, &calibration.set)?;
-    for bound in [lo, hi] {
-        experiment::load(&base_path, &sets_with(&calibration.set, parameter, bound))?;
+    for pair in &pairs {
+        for bound in pair.bounds {
+            let value = BTreeMap::from([(pair.parameter.clone(), bound)]);
+            experiment::load(&base_path, &sets_with(&calibration.set, &value))?;
+        }
     }
     if let Some(s) = calibration.check_spacing_m {
         let mut sets = calibration.set.clone();
@@ -212,24 +300,22 @@ pub fn load(path: &Path) -> Result<Plan, ManifestError> {
             .iter()
             .map(|c| c.name.to_string()),
     );
-    if !known.contains(metric) {
-        return Err(bad(
-            &format!("measured.{metric}"),
-            format!(
-                "is not a metric of the {} test; it records: {}",
-                base.manifest.scene_kind(),
-                known.join(", ")
-            ),
-        ));
+    for pair in &pairs {
+        if !known.contains(&pair.metric) {
+            return Err(bad(
+                &format!("measured.{}", pair.metric),
+                format!(
+                    "is not a metric of the {} test; it records: {}",
+                    base.manifest.scene_kind(),
+                    known.join(", ")
+                ),
+            ));
+        }
     }
     let canonical = serde_json::to_string(&calibration).expect("serialisable");
     let hash_hex = manifest::canonical::sha256_hex(&format!("{canonical}\n{}", base.hash_hex));
     Ok(Plan {
-        metric: metric.clone(),
-        target,
-        tolerance,
-        parameter: parameter.clone(),
-        bounds: [lo, hi],
+        pairs,
         base_path,
         hash_hex,
         base,
@@ -237,9 +323,9 @@ pub fn load(path: &Path) -> Result<Plan, ManifestError> {
     })
 }
 
-fn sets_with(base: &[String], parameter: &str, value: f64) -> Vec<String> {
+fn sets_with(base: &[String], values: &BTreeMap<String, f64>) -> Vec<String> {
     let mut sets = base.to_vec();
-    sets.push(format!("{parameter}={value}"));
+    sets.extend(values.iter().map(|(k, v)| format!("{k}={v}")));
     sets
 }
 
@@ -255,9 +341,10 @@ pub fn round4(x: f64) -> f64 {
 #[derive(Debug, Clone, Serialize)]
 pub struct Evaluation {
     pub round: u32,
-    pub parameter: f64,
-    /// The run's summary metric (NaN when the run failed).
-    pub metric: f64,
+    /// Every fitted value of this run.
+    pub values: BTreeMap<String, f64>,
+    /// The run's measured metrics (NaN, written null, when the run failed).
+    pub metrics: BTreeMap<String, f64>,
     pub outcome: String,
     pub stop: String,
     pub file: String,
@@ -266,10 +353,14 @@ pub struct Evaluation {
     pub start: &'static str,
 }
 
-/// One fit (at the base spacing, or at `check_spacing_m`).
+/// One one-value search: `parameter` fitted from `metric`, the other fitted values `held`.
 #[derive(Debug, Clone, Serialize)]
-pub struct Fit {
-    pub spacing_m: f64,
+pub struct Stage {
+    /// 0 for the first pass over the pairs, 1 for the second, ...
+    pub alternation: u32,
+    pub parameter: String,
+    pub metric: String,
+    pub held: BTreeMap<String, f64>,
     pub evaluations: Vec<Evaluation>,
     /// The closest runs on either side of the measured value, as (parameter, metric).
     pub bracket: Option<[(f64, f64); 2]>,
@@ -280,6 +371,26 @@ pub struct Fit {
     pub converged: bool,
 }
 
+/// One fit (at the base spacing, or at `check_spacing_m`).
+#[derive(Debug, Clone, Serialize)]
+pub struct Fit {
+    pub spacing_m: f64,
+    pub stages: Vec<Stage>,
+    /// Each fitted value, from its last stage.
+    pub fitted: BTreeMap<String, f64>,
+    /// Each fitted value's bracket (the parameters of the two runs around the measured
+    /// value), from its last stage.
+    pub brackets: BTreeMap<String, [f64; 2]>,
+    /// Every measured metric met within its tolerance by the runs of the last bracket.
+    pub converged: bool,
+}
+
+impl Fit {
+    pub fn evaluation_count(&self) -> usize {
+        self.stages.iter().map(|s| s.evaluations.len()).sum()
+    }
+}
+
 /// What a calibration did; written to `calibration.json`.
 #[derive(Debug, Clone, Serialize)]
 pub struct Record {
@@ -287,14 +398,11 @@ pub struct Record {
     pub calibration_sha256: String,
     pub base: String,
     pub base_experiment_sha256: String,
-    pub metric: String,
-    pub measured: f64,
-    pub tolerance: f64,
-    pub parameter: String,
-    pub bounds: [f64; 2],
+    pub pairs: Vec<Pair>,
     pub fits: Vec<Fit>,
-    /// |fitted at the base spacing - fitted at check_spacing_m| / fitted at the base spacing.
-    pub resolution_share: Option<f64>,
+    /// Per fitted value: |fitted at the base spacing - fitted at check_spacing_m| / fitted at
+    /// the base spacing.
+    pub resolution_share: BTreeMap<String, f64>,
 }
 
 /// How to run the calibration's runs.
@@ -305,11 +413,34 @@ pub struct CalibrateOptions {
     pub max_particles: Option<u64>,
 }
 
+/// The first values: the closed-form guess for the yield stress where the test has one, else
+/// the geometric mean of the bounds.
+fn first_values(plan: &Plan) -> BTreeMap<String, f64> {
+    plan.pairs
+        .iter()
+        .map(|pair| {
+            let [lo, hi] = pair.bounds;
+            let guess = (pair.parameter == "fluid.yield_stress_pa")
+                .then(|| {
+                    experiment::yield_stress_guess_pa(
+                        &plan.base.manifest,
+                        &pair.metric,
+                        pair.measured,
+                    )
+                })
+                .flatten()
+                .filter(|v| v.is_finite() && *v > 0.0)
+                .unwrap_or_else(|| libm::sqrt(lo * hi));
+            (pair.parameter.clone(), round4(guess.clamp(lo, hi)))
+        })
+        .collect()
+}
+
 /// Runs the calibration; `on_run` is called for each finished run (in round order).
 pub fn calibrate(
     plan: &Plan,
     options: &CalibrateOptions,
-    on_run: &dyn Fn(&Fit, &Evaluation),
+    on_run: &dyn Fn(&Fit, &Stage, &Evaluation),
 ) -> (PathBuf, Record, Result<(), CalibrateError>) {
     let dir = options.out_dir.join(plan.folder_name());
     let mut record = Record {
@@ -317,19 +448,9 @@ pub fn calibrate(
         calibration_sha256: plan.hash_hex.clone(),
         base: plan.calibration.base.clone(),
         base_experiment_sha256: plan.base.hash_hex.clone(),
-        metric: plan.metric.clone(),
-        measured: plan.target,
-        tolerance: plan.tolerance,
-        parameter: plan.parameter.clone(),
-        bounds: plan.bounds,
+        pairs: plan.pairs.clone(),
         fits: Vec::new(),
-        resolution_share: None,
-    };
-    let guess = {
-        let m = &plan.base.manifest;
-        experiment::yield_stress_guess_pa(m, &plan.metric, plan.target)
-            .filter(|_| plan.parameter == "fluid.yield_stress_pa")
-            .unwrap_or_else(|| libm::sqrt(plan.bounds[0] * plan.bounds[1]))
+        resolution_share: BTreeMap::new(),
     };
     let mut spacings = vec![(plan.calibration.set.clone(), plan.base.manifest.spacing_m)];
     if let Some(s) = plan.calibration.check_spacing_m {
@@ -339,29 +460,155 @@ pub fn calibrate(
     }
     let mut result = Ok(());
     for (sets, spacing_m) in spacings {
-        // The check fit starts from the first fit's value.
-        let start = record.fits.first().and_then(|f| f.fitted).unwrap_or(guess);
+        // The check fit starts from the first fit's values.
+        let start = match record.fits.first() {
+            Some(f) if f.fitted.len() == plan.pairs.len() => f.fitted.clone(),
+            _ => first_values(plan),
+        };
         let mut fit = Fit {
             spacing_m,
-            evaluations: Vec::new(),
-            bracket: None,
-            best: None,
-            fitted: None,
+            stages: Vec::new(),
+            fitted: BTreeMap::new(),
+            brackets: BTreeMap::new(),
             converged: false,
         };
-        let r = search(plan, &sets, start, &dir, options, &mut fit, on_run);
+        let r = fit_at(plan, &sets, start, &dir, options, &mut fit, on_run);
         record.fits.push(fit);
         if let Err(e) = r {
             result = Err(e);
             break;
         }
     }
-    if let [a, b] = record.fits.as_slice()
-        && let (Some(x), Some(y)) = (a.fitted, b.fitted)
-    {
-        record.resolution_share = Some((x - y).abs() / x);
+    if let [a, b] = record.fits.as_slice() {
+        for (k, x) in &a.fitted {
+            if let Some(y) = b.fitted.get(k) {
+                record.resolution_share.insert(k.clone(), (x - y).abs() / x);
+            }
+        }
     }
     (dir, record, result)
+}
+
+/// The alternating search at one spacing (a single pass for one fitted value).
+fn fit_at(
+    plan: &Plan,
+    sets: &[String],
+    mut current: BTreeMap<String, f64>,
+    dir: &Path,
+    options: &CalibrateOptions,
+    fit: &mut Fit,
+    on_run: &dyn Fn(&Fit, &Stage, &Evaluation),
+) -> Result<(), CalibrateError> {
+    let max = plan.calibration.max_evaluations as usize;
+    let mut alternation = 0u32;
+    let result = 'passes: loop {
+        for pair in &plan.pairs {
+            let mut held = current.clone();
+            held.remove(&pair.parameter);
+            let start = stage_start(pair, &current, fit);
+            let mut stage = Stage {
+                alternation,
+                parameter: pair.parameter.clone(),
+                metric: pair.metric.clone(),
+                held,
+                evaluations: Vec::new(),
+                bracket: None,
+                best: None,
+                fitted: None,
+                converged: false,
+            };
+            let budget = max.saturating_sub(fit.evaluation_count());
+            let r = search(
+                plan,
+                pair,
+                sets,
+                start,
+                budget,
+                dir,
+                options,
+                &mut stage,
+                &|s, e| on_run(fit, s, e),
+            );
+            if let Some(f) = stage.fitted {
+                current.insert(pair.parameter.clone(), round4(f));
+            }
+            let all_met = stage.converged && bracket_runs_meet_all(plan, &stage);
+            fit.stages.push(stage);
+            if let Err(e) = r {
+                break 'passes Err(match e {
+                    CalibrateError::NotConverged(_) => {
+                        CalibrateError::NotConverged(fit.evaluation_count() as u32)
+                    }
+                    e => e,
+                });
+            }
+            if all_met {
+                fit.converged = true;
+                break 'passes Ok(());
+            }
+            if fit.evaluation_count() >= max {
+                break 'passes Err(CalibrateError::NotConverged(fit.evaluation_count() as u32));
+            }
+        }
+        alternation += 1;
+    };
+    for pair in &plan.pairs {
+        if let Some(stage) = fit
+            .stages
+            .iter()
+            .rev()
+            .find(|s| s.parameter == pair.parameter)
+        {
+            if let Some(f) = stage.fitted {
+                fit.fitted.insert(pair.parameter.clone(), f);
+            }
+            if let Some(b) = stage.bracket {
+                fit.brackets
+                    .insert(pair.parameter.clone(), [b[0].0, b[1].0]);
+            }
+        }
+    }
+    result
+}
+
+/// Where a stage's search starts: the current value; for a time metric after an earlier
+/// stage, scaled by measured / simulated at that stage's best run (t ~ mu_p, the viscous time
+/// scale mu_p / (rho g H)).
+fn stage_start(pair: &Pair, current: &BTreeMap<String, f64>, fit: &Fit) -> f64 {
+    let value = current[&pair.parameter];
+    let last_best = fit.stages.last().and_then(|s| {
+        let (p, _) = s.best?;
+        s.evaluations
+            .iter()
+            .find(|e| e.values[&s.parameter] == p)
+            .and_then(|e| e.metrics.get(&pair.metric).copied())
+    });
+    match last_best {
+        Some(t) if pair.metric.ends_with("_s") && t.is_finite() && t > 0.0 => {
+            round4((value * pair.measured / t).clamp(pair.bounds[0], pair.bounds[1]))
+        }
+        _ => value,
+    }
+}
+
+/// Both runs of the stage's bracket meet every measured metric within its tolerance.
+fn bracket_runs_meet_all(plan: &Plan, stage: &Stage) -> bool {
+    let Some(b) = stage.bracket else {
+        return false;
+    };
+    b.iter().all(|(p, _)| {
+        stage
+            .evaluations
+            .iter()
+            .find(|e| e.values[&stage.parameter] == *p)
+            .is_some_and(|e| {
+                plan.pairs.iter().all(|q| {
+                    e.metrics
+                        .get(&q.metric)
+                        .is_some_and(|m| (m - q.measured).abs() <= q.tolerance)
+                })
+            })
+    })
 }
 
 /// Bracket in parameter order: (parameter, metric) of the adjacent runs whose metrics lie on
@@ -389,75 +636,83 @@ fn secant(b: [(f64, f64); 2], target: f64) -> f64 {
     }
 }
 
+/// One stage: fits `pair.parameter` from `pair.metric` with `stage.held` fixed, in at most
+/// `budget` runs.
+#[allow(clippy::too_many_arguments)]
 fn search(
     plan: &Plan,
+    pair: &Pair,
     sets: &[String],
     start: f64,
+    budget: usize,
     dir: &Path,
     options: &CalibrateOptions,
-    fit: &mut Fit,
-    on_run: &dyn Fn(&Fit, &Evaluation),
+    stage: &mut Stage,
+    on_run: &dyn Fn(&Stage, &Evaluation),
 ) -> Result<(), CalibrateError> {
-    let [lo, hi] = plan.bounds;
+    let [lo, hi] = pair.bounds;
     let n = plan.calibration.points_per_round as usize;
-    let max = plan.calibration.max_evaluations as usize;
-    let target = plan.target;
+    let target = pair.measured;
     let clamp = |p: f64| round4(p.clamp(lo, hi));
     let mut round = 0u32;
-    // Round 0: points around the guess, a factor 1.3 apart.
+    // Round 0: points around the start, a factor 1.3 apart.
     let mut next: Vec<f64> = (0..n)
         .map(|i| clamp(start * libm::pow(1.3, i as f64 - (n as f64 - 1.0) / 2.0)))
         .collect();
     loop {
         next.dedup();
-        let done: Vec<f64> = fit.evaluations.iter().map(|e| e.parameter).collect();
+        let done: Vec<f64> = stage
+            .evaluations
+            .iter()
+            .map(|e| e.values[&pair.parameter])
+            .collect();
         next.retain(|p| !done.contains(p));
-        next.truncate(max - fit.evaluations.len());
+        next.truncate(budget.saturating_sub(stage.evaluations.len()));
         if next.is_empty() {
             break;
         }
-        for e in run_round(plan, sets, &next, round, dir, options)? {
-            fit.evaluations.push(e);
-            on_run(fit, fit.evaluations.last().expect("just pushed"));
+        for e in run_round(plan, sets, &stage.held, pair, &next, round, dir, options)? {
+            stage.evaluations.push(e);
+            on_run(stage, stage.evaluations.last().expect("just pushed"));
         }
         round += 1;
-        let points: Vec<(f64, f64)> = fit
+        let points: Vec<(f64, f64)> = stage
             .evaluations
             .iter()
-            .map(|e| (e.parameter, e.metric))
+            .map(|e| (e.values[&pair.parameter], e.metrics[&pair.metric]))
             .collect();
-        fit.best = points
+        stage.best = points
             .iter()
             .copied()
             .filter(|p| p.1.is_finite())
             .min_by(|a, b| (a.1 - target).abs().total_cmp(&(b.1 - target).abs()));
-        fit.bracket = bracket_of(&points, target);
-        fit.fitted = fit
+        stage.bracket = bracket_of(&points, target);
+        stage.fitted = stage
             .bracket
             .map(|b| secant(b, target))
-            .or(fit.best.map(|b| b.0));
-        let within = fit
+            .or(stage.best.map(|b| b.0));
+        let within = stage
             .best
-            .is_some_and(|b| (b.1 - target).abs() <= plan.tolerance);
+            .is_some_and(|b| (b.1 - target).abs() <= pair.tolerance);
         // Done when the runs on both sides of the measured value are within the tolerance of
         // it: every value in the bracket then gives it within the tolerance (for a monotone
         // response), so the bracket is the fit's uncertainty.
-        let tight = fit.bracket.is_some_and(|b| {
-            (b[0].1 - target).abs() <= plan.tolerance && (b[1].1 - target).abs() <= plan.tolerance
+        let tight = stage.bracket.is_some_and(|b| {
+            (b[0].1 - target).abs() <= pair.tolerance && (b[1].1 - target).abs() <= pair.tolerance
         });
         if tight {
-            fit.converged = true;
+            stage.converged = true;
             return Ok(());
         }
-        if fit.evaluations.len() >= max {
+        if stage.evaluations.len() >= budget {
             break;
         }
-        next = match fit.bracket {
+        next = match stage.bracket {
             Some(b) => narrowing_points(b, target, n),
-            None => widening_points(plan, &points, n, if within { 1.1 } else { 2.0 })?,
+            None => widening_points(pair, &points, n, if within { 1.1 } else { 2.0 })?,
         };
     }
-    Err(CalibrateError::NotConverged(fit.evaluations.len() as u32))
+    Err(CalibrateError::NotConverged(stage.evaluations.len() as u32))
 }
 
 /// Inside the bracket: the secant estimate, then bisections of the larger remaining part.
@@ -485,12 +740,12 @@ fn narrowing_points(b: [(f64, f64); 2], target: f64, n: usize) -> Vec<f64> {
 /// nearest the value, by powers of `factor` (2; 1.1 once a run is within the tolerance), in
 /// the direction the response points to.
 fn widening_points(
-    plan: &Plan,
+    pair: &Pair,
     points: &[(f64, f64)],
     n: usize,
     factor: f64,
 ) -> Result<Vec<f64>, CalibrateError> {
-    let [lo, hi] = plan.bounds;
+    let [lo, hi] = pair.bounds;
     let mut ok: Vec<(f64, f64)> = points.iter().copied().filter(|p| p.1.is_finite()).collect();
     if ok.is_empty() {
         return Err(CalibrateError::Run(
@@ -502,18 +757,18 @@ fn widening_points(
     // The direction from the data when the runs differ by more than the tolerance (a
     // simulated metric scatters by about a spacing); else the physical prior: a flow length
     // falls as the yield stress (or viscosity) rises, a time (a metric in seconds) rises.
-    let falling = if (last.1 - first.1).abs() > plan.tolerance {
+    let falling = if (last.1 - first.1).abs() > pair.tolerance {
         last.1 < first.1
     } else {
-        !plan.metric.ends_with("_s")
+        !pair.metric.ends_with("_s")
     };
-    let below = first.1 < plan.target; // every metric is below the target
+    let below = first.1 < pair.measured; // every metric is below the target
     let go_down = below == falling;
     let (from, bound) = if go_down { (first, lo) } else { (last, hi) };
     if from.0 == bound {
         return Err(CalibrateError::OutOfBounds(format!(
             "the measured {} = {} is outside what fit.{} in [{lo}, {hi}] gives: at {} the run gives {}",
-            plan.metric, plan.target, plan.parameter, from.0, from.1
+            pair.metric, pair.measured, pair.parameter, from.0, from.1
         )));
     }
     Ok((1..=n)
@@ -524,17 +779,28 @@ fn widening_points(
         .collect())
 }
 
+#[allow(clippy::too_many_arguments)]
 fn run_round(
     plan: &Plan,
     sets: &[String],
+    held: &BTreeMap<String, f64>,
+    pair: &Pair,
     values: &[f64],
     round: u32,
     dir: &Path,
     options: &CalibrateOptions,
 ) -> Result<Vec<Evaluation>, CalibrateError> {
-    let resolved: Vec<Resolved> = values
+    let runs: Vec<BTreeMap<String, f64>> = values
         .iter()
-        .map(|&v| experiment::load(&plan.base_path, &sets_with(sets, &plan.parameter, v)))
+        .map(|&v| {
+            let mut all = held.clone();
+            all.insert(pair.parameter.clone(), v);
+            all
+        })
+        .collect();
+    let resolved: Vec<Resolved> = runs
+        .iter()
+        .map(|all| experiment::load(&plan.base_path, &sets_with(sets, all)))
         .collect::<Result<_, _>>()?;
     let run_options = RunOptions {
         out_dir: dir.to_path_buf(),
@@ -556,7 +822,7 @@ fn run_round(
                 .collect()
         });
     let mut out = Vec::new();
-    for ((value, r), (result, start)) in values.iter().zip(&resolved).zip(results) {
+    for ((all, r), (result, start)) in runs.into_iter().zip(&resolved).zip(results) {
         let result = result.map_err(|e| CalibrateError::Run(e.to_string()))?;
         if let Outcome::Interrupted(why) = &result.outcome {
             return Err(CalibrateError::Interrupted(format!(
@@ -564,18 +830,23 @@ fn run_round(
                 result.path.display()
             )));
         }
+        let completed = matches!(result.outcome, Outcome::Completed);
+        let metrics = plan
+            .pairs
+            .iter()
+            .map(|q| {
+                let m = if completed {
+                    result.summary.metrics.get(&q.metric).copied()
+                } else {
+                    None
+                };
+                (q.metric.clone(), m.unwrap_or(f64::NAN))
+            })
+            .collect();
         out.push(Evaluation {
             round,
-            parameter: *value,
-            metric: match result.outcome {
-                Outcome::Completed => result
-                    .summary
-                    .metrics
-                    .get(&plan.metric)
-                    .copied()
-                    .unwrap_or(f64::NAN),
-                _ => f64::NAN,
-            },
+            values: all,
+            metrics,
             outcome: result.outcome.as_str().to_string(),
             stop: result.summary.stop.clone(),
             file: result
@@ -590,56 +861,71 @@ fn run_round(
     Ok(out)
 }
 
-/// Writes `calibration.json` and the figure (metric against parameter, every run, the
-/// measured value as a line) into the calibration's folder.
-pub fn write_record(dir: &Path, record: &Record) -> std::io::Result<(PathBuf, PathBuf)> {
+/// Writes `calibration.json` and one figure per fitted value (its metric against it, every
+/// run of its stages, the measured value as a line) into the calibration's folder.
+pub fn write_record(dir: &Path, record: &Record) -> std::io::Result<(PathBuf, Vec<PathBuf>)> {
     std::fs::create_dir_all(dir)?;
     let json = dir.join("calibration.json");
     let text = serde_json::to_string_pretty(record).expect("serialisable");
     let partial = dir.join("calibration.json.partial");
     std::fs::write(&partial, text + "\n")?;
     std::fs::rename(&partial, &json)?;
-    let figure = dir.join(format!(
-        "calibration-{}-vs-{}.svg",
-        record.metric, record.parameter
-    ));
-    let mut series = Vec::new();
-    for fit in &record.fits {
-        let mut points: Vec<(f64, f64)> = fit
-            .evaluations
-            .iter()
-            .filter(|e| e.metric.is_finite())
-            .map(|e| (e.parameter, e.metric))
-            .collect();
-        points.sort_by(|a, b| a.0.total_cmp(&b.0));
-        series.push(crate::report::plot::Series {
-            label: format!("runs at spacing {} m", fit.spacing_m),
-            points,
+    let mut figures = Vec::new();
+    for pair in &record.pairs {
+        let figure = dir.join(format!(
+            "calibration-{}-vs-{}.svg",
+            pair.metric, pair.parameter
+        ));
+        let mut series = Vec::new();
+        for fit in &record.fits {
+            for stage in fit.stages.iter().filter(|s| s.parameter == pair.parameter) {
+                let mut points: Vec<(f64, f64)> = stage
+                    .evaluations
+                    .iter()
+                    .map(|e| (e.values[&pair.parameter], e.metrics[&pair.metric]))
+                    .filter(|p| p.1.is_finite())
+                    .collect();
+                points.sort_by(|a, b| a.0.total_cmp(&b.0));
+                let held: Vec<String> = stage
+                    .held
+                    .iter()
+                    .map(|(k, v)| format!("{k} = {v}"))
+                    .collect();
+                series.push(crate::report::plot::Series {
+                    label: if held.is_empty() {
+                        format!("runs at spacing {} m", fit.spacing_m)
+                    } else {
+                        format!("runs at spacing {} m, {}", fit.spacing_m, held.join(", "))
+                    },
+                    points,
+                });
+            }
+        }
+        let xs = series.iter().flat_map(|s| s.points.iter().map(|p| p.0));
+        let (x0, x1) = xs.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| {
+            (a.min(x), b.max(x))
         });
+        if x0.is_finite() {
+            series.push(crate::report::plot::Series {
+                label: format!("measured {} = {}", pair.metric, pair.measured),
+                points: vec![(x0, pair.measured), (x1, pair.measured)],
+            });
+        }
+        crate::report::plot::line_plot(
+            &figure,
+            &format!(
+                "calibration {}: {} against {}",
+                record.name, pair.metric, pair.parameter
+            ),
+            &crate::report::axis_label(&pair.parameter),
+            &crate::report::axis_label(&pair.metric),
+            &series,
+            true,
+        )
+        .map_err(|e| std::io::Error::other(e.to_string()))?;
+        figures.push(figure);
     }
-    let xs = series.iter().flat_map(|s| s.points.iter().map(|p| p.0));
-    let (x0, x1) = xs.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| {
-        (a.min(x), b.max(x))
-    });
-    if x0.is_finite() {
-        series.push(crate::report::plot::Series {
-            label: format!("measured {} = {}", record.metric, record.measured),
-            points: vec![(x0, record.measured), (x1, record.measured)],
-        });
-    }
-    crate::report::plot::line_plot(
-        &figure,
-        &format!(
-            "calibration {}: {} against {}",
-            record.name, record.metric, record.parameter
-        ),
-        &crate::report::axis_label(&record.parameter),
-        &crate::report::axis_label(&record.metric),
-        &series,
-        true,
-    )
-    .map_err(|e| std::io::Error::other(e.to_string()))?;
-    Ok((json, figure))
+    Ok((json, figures))
 }
 
 #[cfg(test)]

@@ -60,13 +60,19 @@ fn a_known_yield_stress_is_recovered_from_its_spread() {
         serde_json::from_str(&std::fs::read_to_string(&json_path).unwrap()).unwrap();
     let fit = &record["fits"][0];
     assert_eq!(fit["converged"], true);
-    let fitted = fit["fitted"].as_f64().unwrap();
-    // The bracket holds the measured value and the fitted one.
-    let b = fit["bracket"].as_array().expect("a bracket");
+    let fitted = fit["fitted"]["fluid.yield_stress_pa"].as_f64().unwrap();
+    // One fitted value: one stage, whose bracket holds the measured value and the fitted one.
+    let stages = fit["stages"].as_array().unwrap();
+    assert_eq!(stages.len(), 1);
+    let b = stages[0]["bracket"].as_array().expect("a bracket");
     let (p0, m0) = (b[0][0].as_f64().unwrap(), b[0][1].as_f64().unwrap());
     let (p1, m1) = (b[1][0].as_f64().unwrap(), b[1][1].as_f64().unwrap());
     assert!(p0 <= fitted && fitted <= p1, "{b:?} {fitted}");
     assert!(m0 >= measured_m && measured_m >= m1, "{b:?} {measured_m}");
+    assert_eq!(
+        fit["brackets"]["fluid.yield_stress_pa"][0].as_f64(),
+        Some(p0)
+    );
     // As close as the resolution allows: the front at 2 s scatters by about a spacing between
     // nearby yield stresses (MEASURED: 0.385 m at 125 Pa, 0.390 m at 128.5 Pa, 0.388 m at
     // 133.2 Pa), and L ~ tau^(-s) with s >= 0.2 (MEASURED 0.23 between 111 and 144 Pa), so
@@ -77,7 +83,7 @@ fn a_known_yield_stress_is_recovered_from_its_spread() {
         "fitted {fitted} Pa, known {tau_pa} Pa, allowed +-{allowed:.2} Pa"
     );
     // Every run is a recorded file in the folder, named by its experiment hash.
-    let evaluations = fit["evaluations"].as_array().unwrap();
+    let evaluations = stages[0]["evaluations"].as_array().unwrap();
     assert!(evaluations.len() >= 2);
     for e in evaluations {
         let file = json_path
@@ -103,8 +109,89 @@ fn a_known_yield_stress_is_recovered_from_its_spread() {
     let again: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&json_path).unwrap()).unwrap();
     assert_eq!(again["fits"][0]["fitted"], fit["fitted"]);
-    for e in again["fits"][0]["evaluations"].as_array().unwrap() {
+    for e in again["fits"][0]["stages"][0]["evaluations"]
+        .as_array()
+        .unwrap()
+    {
         assert_eq!(e["start"], "existing", "{e}");
+    }
+}
+
+/// Two values from two measurements: the yield stress from the L-flow front at 2 s and the
+/// plastic viscosity from T200, the time the front takes to run 200 mm (EN 12350-10's L-box
+/// time), by alternating one-value searches. About 12 runs of 2 s CPU.
+#[test]
+fn a_known_yield_stress_and_viscosity_are_recovered_from_front_and_t200() {
+    let (tau_pa, mu_pa_s) = (125.0, 50.0);
+    let dir = tempfile::tempdir().unwrap();
+    let known = common::run_completed(&common::resolve("l_flow_2d.yaml", &COARSE), dir.path(), 2);
+    let front_m = known.summary.metrics["l_flow_value_m"];
+    let t200_s = known.summary.metrics["t200_s"];
+    // The crossing is interpolated between diagnostics rows 0.02 s apart; the front scatters by
+    // about a spacing, which moves T200 by about l0 / (front speed ~ 0.4 m/s) = 0.025 s.
+    let tolerance_s = 0.02;
+    let base = common::experiment("l_flow_2d.yaml");
+    let sets: Vec<String> = COARSE.iter().map(|s| format!("  - {s}\n")).collect();
+    let text = format!(
+        "name: calib_two\nbase: {}\nset:\n{}measured:\n  l_flow_value_m: {front_m}\n  t200_s: {t200_s}\ntolerance:\n  l_flow_value_m: {L0_M}\n  t200_s: {tolerance_s}\nfit:\n  fluid.yield_stress_pa: [40, 400]\n  fluid.plastic_viscosity_pa_s: [5, 500]\npairs:\n  - {{fit: fluid.yield_stress_pa, from: l_flow_value_m}}\n  - {{fit: fluid.plastic_viscosity_pa_s, from: t200_s}}\nmax_evaluations: 40\n",
+        base.display(),
+        sets.concat()
+    );
+    let path = dir.path().join("calib.yaml");
+    std::fs::write(&path, text).unwrap();
+    let (code, stdout, stderr) = calibrate(&path, &dir.path().join("runs"));
+    eprintln!("{stderr}");
+    assert_eq!(code, Some(0), "{stderr}");
+    let json_path = std::path::PathBuf::from(stdout.trim());
+    let record: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json_path).unwrap()).unwrap();
+    let fit = &record["fits"][0];
+    assert_eq!(fit["converged"], true);
+    let tau = fit["fitted"]["fluid.yield_stress_pa"].as_f64().unwrap();
+    let mu = fit["fitted"]["fluid.plastic_viscosity_pa_s"]
+        .as_f64()
+        .unwrap();
+    // The yield stress as in the one-value test: (l0 / L) / 0.2 of itself.
+    let tau_allowed = tau_pa * (L0_M / front_m) / 0.2;
+    assert!(
+        (tau - tau_pa).abs() <= tau_allowed,
+        "tau {tau}, allowed +-{tau_allowed:.2}"
+    );
+    // T200 ~ mu_p (viscous time scale): the tolerance is tolerance_s / T200 of mu, doubled for
+    // what the yield stress's own error moves T200 by.
+    let mu_allowed = mu_pa_s * 2.0 * tolerance_s / t200_s;
+    assert!(
+        (mu - mu_pa_s).abs() <= mu_allowed,
+        "mu {mu}, allowed +-{mu_allowed:.2}"
+    );
+    // The stages alternate, the last one's bracket runs meet both measurements, and every run
+    // names its two values.
+    let stages = fit["stages"].as_array().unwrap();
+    assert!(stages.len() >= 2);
+    assert_eq!(stages[0]["parameter"], "fluid.yield_stress_pa");
+    assert_eq!(stages[1]["parameter"], "fluid.plastic_viscosity_pa_s");
+    let last = stages.last().unwrap();
+    let bracket = last["bracket"].as_array().unwrap();
+    for side in bracket {
+        let p = side[0].as_f64().unwrap();
+        let e = last["evaluations"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|e| e["values"][last["parameter"].as_str().unwrap()].as_f64() == Some(p))
+            .expect("the bracket's run");
+        assert!((e["metrics"]["l_flow_value_m"].as_f64().unwrap() - front_m).abs() <= L0_M);
+        assert!((e["metrics"]["t200_s"].as_f64().unwrap() - t200_s).abs() <= tolerance_s);
+        assert_eq!(e["values"].as_object().unwrap().len(), 2);
+    }
+    for figure in [
+        "calibration-l_flow_value_m-vs-fluid.yield_stress_pa.svg",
+        "calibration-t200_s-vs-fluid.plastic_viscosity_pa_s.svg",
+    ] {
+        assert!(
+            json_path.parent().unwrap().join(figure).exists(),
+            "{figure}"
+        );
     }
 }
 
@@ -142,6 +229,52 @@ fn bad_calibrations_name_the_field() {
             !dir.path().join("runs").exists(),
             "nothing is written for bad input"
         );
+    }
+    // Two fitted values need `pairs`, each naming a fitted value and a measured metric once.
+    let two = good
+        .replacen(
+            "l_flow_value_m: 0.5\n",
+            "l_flow_value_m: 0.5\n  t200_s: 0.5\n",
+            1,
+        )
+        .replacen(
+            "l_flow_value_m: 0.0025\n",
+            "l_flow_value_m: 0.0025\n  t200_s: 0.02\n",
+            1,
+        )
+        .replacen(
+            "[40, 400]\n",
+            "[40, 400]\n  fluid.plastic_viscosity_pa_s: [5, 500]\n",
+            1,
+        );
+    let pairs = "pairs:\n  - {fit: fluid.yield_stress_pa, from: l_flow_value_m}\n  - {fit: fluid.plastic_viscosity_pa_s, from: t200_s}\n";
+    for (text, field) in [
+        (two.clone(), "pairs"),
+        (
+            format!("{two}{}", pairs.replacen("from: t200_s", "from: t400_s", 1)),
+            "pairs[1]",
+        ),
+        (
+            format!(
+                "{two}{}",
+                pairs.replacen("from: t200_s", "from: l_flow_value_m", 1)
+            ),
+            "pairs[1]",
+        ),
+        (
+            format!("{two}{pairs}").replacen("  t200_s: 0.02\n", "", 1),
+            "tolerance",
+        ),
+        (
+            format!("{}{pairs}", two.replacen("  t200_s: 0.5\n", "", 1)),
+            "fit",
+        ),
+    ] {
+        let path = dir.path().join("bad2.yaml");
+        std::fs::write(&path, &text).unwrap();
+        let (code, _, stderr) = calibrate(&path, &dir.path().join("runs"));
+        assert_eq!(code, Some(2), "{text}\n{stderr}");
+        assert!(stderr.contains(field), "{field}: {stderr}");
     }
     // A measured value outside what the bounds give: exit 2, named.
     let far = calibration_text(0.05, 0.0025);

@@ -417,32 +417,55 @@ fn calibrate_command(path: &Path, out_dir: PathBuf, max_particles: u64) -> ExitC
             return ExitCode::from(EXIT_BAD_INPUT);
         }
     };
+    for pair in &plan.pairs {
+        eprintln!(
+            "{}: fitting {} in [{}, {}] to {} = {} (tolerance {})",
+            plan.calibration.name,
+            pair.parameter,
+            pair.bounds[0],
+            pair.bounds[1],
+            pair.metric,
+            pair.measured,
+            pair.tolerance,
+        );
+    }
     eprintln!(
-        "{}: fitting {} in [{}, {}] to {} = {} (tolerance {}), {} run(s) per round",
-        plan.calibration.name,
-        plan.parameter,
-        plan.bounds[0],
-        plan.bounds[1],
-        plan.metric,
-        plan.target,
-        plan.tolerance,
-        plan.calibration.points_per_round
+        "{} run(s) per round{}",
+        plan.calibration.points_per_round,
+        if plan.pairs.len() > 1 {
+            ", alternating one value at a time in the order above"
+        } else {
+            ""
+        }
     );
     let options = CalibrateOptions {
         out_dir,
         interrupt: interrupt_flag(),
         max_particles: Some(max_particles),
     };
-    let on_run = |fit: &calibrate::Fit, e: &calibrate::Evaluation| {
+    let on_run = |fit: &calibrate::Fit, stage: &calibrate::Stage, e: &calibrate::Evaluation| {
+        let held: String = stage
+            .held
+            .iter()
+            .map(|(k, v)| format!(", {k} = {v}"))
+            .collect();
+        let metrics: Vec<String> = plan
+            .pairs
+            .iter()
+            .map(|q| {
+                let m = e.metrics[&q.metric];
+                format!("{} = {:.5} (off by {:+.5})", q.metric, m, m - q.measured)
+            })
+            .collect();
         eprintln!(
-            "  [spacing {} m, round {}] {} = {} -> {} = {:.5} (off by {:+.5}; {} {}, {})",
+            "  [spacing {} m, pass {}, round {}] {} = {}{} -> {}; {} {}, {}",
             fit.spacing_m,
+            stage.alternation,
             e.round,
-            plan.parameter,
-            e.parameter,
-            plan.metric,
-            e.metric,
-            e.metric - plan.target,
+            stage.parameter,
+            e.values[&stage.parameter],
+            held,
+            metrics.join(", "),
             e.start,
             e.outcome,
             e.file
@@ -450,37 +473,39 @@ fn calibrate_command(path: &Path, out_dir: PathBuf, max_particles: u64) -> ExitC
     };
     let (dir, record, result) = calibrate::calibrate(&plan, &options, &on_run);
     match calibrate::write_record(&dir, &record) {
-        Ok((json, figure)) => {
+        Ok((json, figures)) => {
             for fit in &record.fits {
-                if let Some(b) = fit.bracket {
-                    eprintln!(
-                        "spacing {} m: bracket {} in [{}, {}] ({} = {:.5} .. {:.5})",
-                        fit.spacing_m, plan.parameter, b[0].0, b[1].0, plan.metric, b[0].1, b[1].1
-                    );
-                }
-                if let (Some(f), Some(best)) = (fit.fitted, fit.best) {
-                    eprintln!(
-                        "spacing {} m: fitted {} = {:.4} (log-log interpolation in the bracket); closest run {} gives {:.5}{}",
-                        fit.spacing_m,
-                        plan.parameter,
-                        f,
-                        best.0,
-                        best.1,
-                        if fit.converged {
-                            ""
-                        } else {
-                            " (not within the tolerance)"
-                        }
-                    );
+                for pair in &plan.pairs {
+                    if let Some(b) = fit.brackets.get(&pair.parameter) {
+                        eprintln!(
+                            "spacing {} m: bracket {} in [{}, {}]",
+                            fit.spacing_m, pair.parameter, b[0], b[1]
+                        );
+                    }
+                    if let Some(f) = fit.fitted.get(&pair.parameter) {
+                        eprintln!(
+                            "spacing {} m: fitted {} = {:.4} (log-log interpolation in the bracket){}",
+                            fit.spacing_m,
+                            pair.parameter,
+                            f,
+                            if fit.converged {
+                                ""
+                            } else {
+                                " (not every measured value met within its tolerance)"
+                            }
+                        );
+                    }
                 }
             }
-            if let Some(share) = record.resolution_share {
+            for (parameter, share) in &record.resolution_share {
                 eprintln!(
-                    "resolution: the fitted values at the two spacings differ by {:.1} %",
+                    "resolution: the fitted {parameter} at the two spacings differ by {:.1} %",
                     100.0 * share
                 );
             }
-            eprintln!("figure: {}", figure.display());
+            for figure in &figures {
+                eprintln!("figure: {}", figure.display());
+            }
             println!("{}", json.display());
         }
         Err(e) => {

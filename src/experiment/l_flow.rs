@@ -106,6 +106,20 @@ impl Experiment for LFlow {
     fn trend_metric(&self) -> &'static str {
         "l_flow_value_m"
     }
+    /// The times the front takes to run 200 mm and 400 mm past the gate (released at t = 0),
+    /// as the L-box test's T200 and T400 (EN 12350-10): the flow's speed, which the plastic
+    /// viscosity sets.
+    fn crossings(&self, _m: &Manifest) -> Vec<super::Crossing> {
+        [("t200_s", 0.2), ("t400_s", 0.4)]
+            .into_iter()
+            .map(|(name, threshold)| super::Crossing {
+                name,
+                metric: "l_flow_value_m",
+                threshold,
+                since_s: 0.0,
+            })
+            .collect()
+    }
 }
 
 type CellBox<const D: usize> = ([i64; D], [i64; D]);
