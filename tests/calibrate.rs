@@ -187,6 +187,7 @@ fn a_known_yield_stress_and_viscosity_are_recovered_from_front_and_t200() {
     for figure in [
         "calibration-l_flow_value_m-vs-fluid.yield_stress_pa.svg",
         "calibration-t200_s-vs-fluid.plastic_viscosity_pa_s.svg",
+        "calibration-t200_s-vs-fluid.plastic_viscosity_pa_s.png",
     ] {
         assert!(
             json_path.parent().unwrap().join(figure).exists(),

@@ -188,6 +188,26 @@ enum Command {
         #[arg(long)]
         out: Option<PathBuf>,
     },
+    /// PNG figures of a run (diagnostics against time, snapshots with a colour bar, the
+    /// test's own figure) or of a sweep folder (each summary metric against the swept value),
+    /// and one self-contained HTML page showing them with the run's facts; prints the page's
+    /// path
+    Report {
+        /// Run file, or a folder of run files (a sweep folder).
+        path: PathBuf,
+        /// Report folder (default: <run>-report/ beside the run; DIR/report/ for a folder).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Snapshot time (s; repeatable; default: four from the start to the end).
+        #[arg(long = "time", value_name = "SECONDS")]
+        times: Vec<f64>,
+        /// Point field that colours the snapshots (default: speed_m_s).
+        #[arg(long)]
+        field: Option<String>,
+        /// Keep each figure's SVG beside its PNG.
+        #[arg(long)]
+        svg: bool,
+    },
     /// What a run file holds: experiment, outcome, stop rule, build, particles, time,
     /// checkpoints, metrics, channels; for an unfinished or cut file, what is missing (exit 0;
     /// 2 when the file is unusable, or named finished but incomplete: it is described, then
@@ -389,6 +409,32 @@ fn main() -> ExitCode {
             report_result(report::profile(&run, out.as_deref()).map(|(path, table)| {
                 print!("{table}");
                 path
+            }))
+        }
+        Some(Command::Report {
+            path,
+            out,
+            times,
+            field,
+            svg,
+        }) => {
+            if !path.is_dir()
+                && let Err(code) = readable_run(&path)
+            {
+                return code;
+            }
+            let options = report::page::ReportOptions {
+                out,
+                times_s: times,
+                field,
+                keep_svg: svg,
+            };
+            report_results(report::page::report(&path, &options).map(|r| {
+                for why in &r.skipped {
+                    eprintln!("left out: {why}");
+                }
+                eprintln!("{} figure(s) in {}", r.figures.len(), r.dir.display());
+                vec![r.page]
             }))
         }
         Some(Command::Info { file, json }) => info_command(&file, json),

@@ -250,6 +250,13 @@ pub fn export_file(path: &Path) -> Result<(Table, Table)> {
 /// `runner export DIR`: the summary table of the run files (`*.mcap`) in `dir`, and the files
 /// left out (unreadable, or unfinished: no `/summary` message) with why.
 pub fn export_dir(dir: &Path) -> Result<(Table, Vec<(PathBuf, String)>)> {
+    let (runs, skipped) = finished_rows(dir)?;
+    Ok((summary_table(&runs), skipped))
+}
+
+/// The finished run files (`*.mcap`) of `dir` as rows, and the files left out with why; an
+/// error when none is finished.
+pub fn finished_rows(dir: &Path) -> Result<(Vec<RunRow>, Vec<(PathBuf, String)>)> {
     let mut runs = Vec::new();
     let mut skipped = Vec::new();
     for file in run_files(dir)? {
@@ -267,5 +274,5 @@ pub fn export_dir(dir: &Path) -> Result<(Table, Vec<(PathBuf, String)>)> {
             dir.display()
         )));
     }
-    Ok((summary_table(&runs), skipped))
+    Ok((runs, skipped))
 }

@@ -1,15 +1,17 @@
 //! Reports made from recorded runs: SVG plots of diagnostics, sweep results and particle
-//! snapshots (`runner plot`, `runner plot-sweep`, `runner snapshot`); what a run file holds
+//! snapshots (`runner plot`, `runner plot-sweep`, `runner snapshot`); PNG from them
+//! ([`png`]) and the report page (`runner report`, [`page`]); what a run file holds
 //! (`runner info`, [`info`]) and its data as tables (`runner export`, [`export`]).
 //!
-//! Plots are SVG, drawn with `plotters`' SVG backend: text is written as SVG `<text>`
-//! elements, so no font has to be found or rasterised (no fontconfig/freetype, nothing to
-//! install, no font file to ship).
+//! Plots are drawn as SVG with `plotters`' SVG backend (text as SVG `<text>`, no font
+//! lookup); PNGs are those SVGs rasterised with the shipped font.
 
 pub mod cloud;
 pub mod export;
 pub mod info;
+pub mod page;
 pub mod plot;
+pub mod png;
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -114,6 +116,15 @@ pub fn run_title(run: &RunFile) -> String {
 
 /// The unit of a quantity named with a unit suffix (`front_position_m` -> `m`), if known.
 pub fn unit_of(name: &str) -> Option<&'static str> {
+    unit_entry(name).map(|(_, unit)| unit)
+}
+
+/// The unit suffix of a name (`_m_s` of `max_speed_m_s`), see [`unit_of`].
+pub fn unit_suffix(name: &str) -> Option<&'static str> {
+    unit_entry(name).map(|(suffix, _)| suffix)
+}
+
+fn unit_entry(name: &str) -> Option<(&'static str, &'static str)> {
     const SUFFIXES: &[(&str, &str)] = &[
         ("_kg_m3", "kg/m³"),
         ("_m_s2", "m/s²"),
@@ -131,7 +142,7 @@ pub fn unit_of(name: &str) -> Option<&'static str> {
     SUFFIXES
         .iter()
         .find(|(suffix, _)| last.ends_with(suffix))
-        .map(|(_, unit)| *unit)
+        .copied()
 }
 
 /// Axis label: the name with its unit in brackets (`[-]` when unitless).
@@ -397,6 +408,14 @@ pub fn default_sweep_metrics(metrics: &BTreeMap<String, f64>) -> Vec<String> {
         .collect()
 }
 
+/// A simulated time for titles: to the microsecond, trailing zeros dropped (`0.3`, not
+/// `0.30000000000000004`).
+pub fn time_text(t_s: f64) -> String {
+    let s = format!("{t_s:.6}");
+    let s = s.trim_end_matches('0');
+    s.strip_suffix('.').unwrap_or(s).to_string()
+}
+
 /// `runner snapshot`: the last `/particles` frame of a run, or the one nearest `time_s`,
 /// coloured by `field` (default `kind`). Default output:
 /// `<run>-snapshot-<field>[-t<time>].svg` beside the run file.
@@ -476,7 +495,7 @@ pub fn snapshot(
         || beside(mcap, &format!("-snapshot{suffix}-{}{at}.svg", slug(field))),
         Path::to_path_buf,
     );
-    let title = format!("{} at t = {time} s: {field}", run_title(&run));
+    let title = format!("{} at t = {} s: {field}", run_title(&run), time_text(time));
     plot::snapshot_plot(&out, &title, &frame, field, view)?;
     Ok(out)
 }

@@ -231,8 +231,18 @@ pub fn snapshot_plot(
         .collect();
     let coloring = coloring(&colored);
 
-    let root = SVGBackend::new(path, (width, height)).into_drawing_area();
-    root.fill(&WHITE).map_err(|x| e(&x))?;
+    // A ramp gets a colour bar in a strip on the right.
+    let bar_w = if matches!(coloring, Coloring::Ramp(..)) {
+        150
+    } else {
+        0
+    };
+    let full = SVGBackend::new(path, (width + bar_w, height)).into_drawing_area();
+    full.fill(&WHITE).map_err(|x| e(&x))?;
+    let (root, bar) = full.split_horizontally(width);
+    if let Coloring::Ramp(lo, hi) = coloring {
+        colour_bar(&bar, field, lo, hi, height).map_err(|x| e(&x))?;
+    }
     let mut chart = ChartBuilder::on(&root)
         .caption(title, ("sans-serif", 20))
         .margin(10)
@@ -297,7 +307,7 @@ pub fn snapshot_plot(
                     });
             }
         }
-        Coloring::Ramp(lo, hi) => {
+        Coloring::Ramp(..) => {
             chart
                 .draw_series(
                     others
@@ -305,20 +315,6 @@ pub fn snapshot_plot(
                         .map(|&i| Circle::new(pts[i], radius, color_of(values[i]).filled())),
                 )
                 .map_err(|x| e(&x))?;
-            for (t, name) in [(0.0, "1st percentile"), (1.0, "99th percentile")] {
-                let v = lo + t * (hi - lo);
-                let color = ramp(t);
-                chart
-                    .draw_series(std::iter::empty::<Circle<(f64, f64), i32>>())
-                    .map_err(|x| e(&x))?
-                    .label(format!(
-                        "{field} {name} {v:.4} {}",
-                        super::unit_of(field).unwrap_or("")
-                    ))
-                    .legend(move |(x, y)| {
-                        Rectangle::new([(x, y - 5), (x + 12, y + 5)], color.filled())
-                    });
-            }
         }
     }
     chart
@@ -328,7 +324,54 @@ pub fn snapshot_plot(
         .position(SeriesLabelPosition::UpperRight)
         .draw()
         .map_err(|x| e(&x))?;
-    root.present().map_err(|x| e(&x))?;
+    full.present().map_err(|x| e(&x))?;
+    Ok(())
+}
+
+/// A vertical colour bar for the ramp over `[lo, hi]` (1st to 99th percentile; values beyond
+/// are drawn in the end colours): the field and its unit on top, five ticks.
+fn colour_bar<DB: DrawingBackend>(
+    area: &DrawingArea<DB, plotters::coord::Shift>,
+    field: &str,
+    lo: f64,
+    hi: f64,
+    height: u32,
+) -> std::result::Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+    let (top, bottom) = (70i32, height as i32 - 60);
+    let (x0, x1) = (15i32, 40i32);
+    let steps = 100;
+    let span = f64::from(bottom - top);
+    for k in 0..steps {
+        let t0 = f64::from(k) / f64::from(steps);
+        let y_hi = bottom - (t0 * span) as i32;
+        let y_lo = bottom - ((t0 + 1.0 / f64::from(steps)) * span) as i32;
+        area.draw(&Rectangle::new([(x0, y_lo), (x1, y_hi)], ramp(t0).filled()))?;
+    }
+    area.draw(&Rectangle::new(
+        [(x0, top), (x1, bottom)],
+        BLACK.stroke_width(1),
+    ))?;
+    let unit = super::unit_of(field).map_or(String::new(), |u| format!(" [{u}]"));
+    area.draw(&Text::new(
+        format!("{field}{unit}"),
+        (2, top - 40),
+        ("sans-serif", 14),
+    ))?;
+    area.draw(&Text::new(
+        "1st-99th percentile",
+        (2, top - 22),
+        ("sans-serif", 11),
+    ))?;
+    for k in 0..=4 {
+        let t = f64::from(k) / 4.0;
+        let y = bottom - (t * span) as i32;
+        area.draw(&PathElement::new(vec![(x1, y), (x1 + 5, y)], BLACK))?;
+        area.draw(&Text::new(
+            format!("{:.4}", lo + t * (hi - lo)),
+            (x1 + 8, y - 6),
+            ("sans-serif", 12),
+        ))?;
+    }
     Ok(())
 }
 
