@@ -811,7 +811,7 @@ fn run_round(
     let run_options = RunOptions {
         out_dir: dir.to_path_buf(),
         threads: Some(1),
-        progress: false,
+        progress: None,
         interrupt: options.interrupt.clone(),
         max_particles: options.max_particles,
         overwrite: false,

@@ -18,11 +18,11 @@ use std::sync::atomic::AtomicBool;
 /// Metadata record a resumed file carries (after `manifest`, `build`, `run`).
 pub const META_RESUMED: &str = "resumed";
 
-#[derive(Debug, Clone, Default)]
+#[derive(Clone, Default)]
 pub struct ResumeOptions {
     /// Worker threads; None = all cores.
     pub threads: Option<usize>,
-    pub progress: bool,
+    pub progress: Option<crate::run::ProgressFn>,
     /// Set from outside (signal handler) to stop cleanly as "interrupted".
     pub interrupt: Option<Arc<AtomicBool>>,
 }
@@ -240,7 +240,7 @@ fn resume_in<const D: usize>(job: Job) -> Result<RunResult, ResumeError> {
     }
     let control = LoopControl {
         interrupt: options.interrupt.clone(),
-        progress: options.progress,
+        progress: options.progress.clone(),
         stop_at_step: None,
     };
     let start = LoopStart {

@@ -19,8 +19,11 @@ use crate::resume::{ResumeError, ResumeOptions, resume};
 use crate::run::{RunError, RunOptions, RunResult, output_path, run};
 
 /// How to run a sweep.
-#[derive(Debug, Clone, Default)]
+#[derive(Clone, Default)]
 pub struct SweepOptions {
+    /// Passed to every run: told where each stands after every step (the run's label tells
+    /// the concurrent points apart).
+    pub progress: Option<crate::run::ProgressFn>,
     /// Parent directory; the sweep writes into `out_dir/<Sweep::folder_name>`.
     pub out_dir: PathBuf,
     /// Concurrent points; None = all cores (at most the number of points).
@@ -91,7 +94,7 @@ pub fn run_sweep(
     let run_options = RunOptions {
         out_dir: dir.clone(),
         threads: Some(1),
-        progress: false,
+        progress: options.progress.clone(),
         interrupt: options.interrupt.clone(),
         max_particles: options.max_particles,
         overwrite: options.overwrite,
@@ -137,7 +140,7 @@ pub(crate) fn run_point(
     let resume_from = |source: &std::path::Path| {
         let resume_options = ResumeOptions {
             threads: options.threads,
-            progress: false,
+            progress: options.progress.clone(),
             interrupt: options.interrupt.clone(),
         };
         let result = match resume(source, &resume_options) {

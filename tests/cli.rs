@@ -235,3 +235,62 @@ fn bench_reports_what_its_run_recorded() {
         .assert()
         .code(2);
 }
+
+/// Progress on stderr: piped (as in CI logs), one plain line per tenth of the simulated time
+/// with the step rate, particles and time left; none with --quiet; a bar on a terminal
+/// (run under `script`, which gives the runner a pseudo-terminal).
+#[test]
+fn progress_is_plain_lines_when_piped_a_bar_on_a_terminal_and_none_when_quiet() {
+    let dir = tempfile::tempdir().unwrap();
+    let exp = common::experiment("smoke_2d.yaml");
+    let out = runner()
+        .arg(&exp)
+        .arg("--out")
+        .arg(dir.path())
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let stderr = String::from_utf8(out.stderr).unwrap();
+    let lines: Vec<&str> = stderr
+        .lines()
+        .filter(|l| l.starts_with("smoke_2d-") && l.contains(" steps/s, 246 particles, "))
+        .collect();
+    assert_eq!(lines.len(), 10, "{stderr}");
+    assert!(
+        lines[9].contains("t = 0.1000 / 0.1 s, step 100,"),
+        "{}",
+        lines[9]
+    );
+    assert!(lines.iter().all(|l| l.contains(" s left")));
+
+    let out = runner()
+        .arg(&exp)
+        .arg("--out")
+        .arg(dir.path())
+        .args(["--overwrite", "--quiet"])
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let quiet = String::from_utf8(out.stderr).unwrap();
+    assert!(!quiet.contains(" s left"), "{quiet}");
+    assert_eq!(quiet.lines().count(), 1, "only the outcome line: {quiet}");
+
+    let command = format!(
+        "{} {} --out {} --overwrite --set time.end_s=2",
+        env!("CARGO_BIN_EXE_runner"),
+        exp.display(),
+        dir.path().display()
+    );
+    let out = std::process::Command::new("script")
+        .args(["-q", "-e", "-c", &command, "/dev/null"])
+        .output()
+        .expect("`script` (util-linux) runs the runner on a pseudo-terminal");
+    assert!(out.status.success(), "{out:?}");
+    let tty = String::from_utf8_lossy(&out.stdout);
+    assert!(tty.contains("smoke_2d-") && tty.contains("%") && tty.contains("steps/s"));
+    assert!(tty.contains("[>") || tty.contains("=>"), "a bar: {tty}");
+    assert!(
+        !tty.contains(" s wall, about "),
+        "no plain lines on a terminal: {tty}"
+    );
+}

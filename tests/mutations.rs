@@ -313,7 +313,7 @@ fn seeds(dir: &Path) -> Vec<Seed> {
         &mps_runner::run::RunOptions {
             out_dir: dir.join("interrupted"),
             threads: Some(1),
-            progress: false,
+            progress: None,
             interrupt: Some(std::sync::Arc::new(std::sync::atomic::AtomicBool::new(
                 true,
             ))),

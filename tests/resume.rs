@@ -197,7 +197,7 @@ fn an_interrupted_library_run_resumes_to_the_same_hashes() {
         &mps_runner::run::RunOptions {
             out_dir: out.clone(),
             threads: Some(2),
-            progress: false,
+            progress: None,
             interrupt: Some(Arc::new(AtomicBool::new(true))),
             max_particles: None,
             overwrite: false,

@@ -183,7 +183,7 @@ fn segments_replay_from_a_logged_checkpoint() {
                 from,
                 to,
                 threads: Some(2),
-                progress: false,
+                progress: None,
             },
         )
         .unwrap();

@@ -98,13 +98,32 @@ pub struct LoopStart {
     pub logged_rows: Vec<(f64, BTreeMap<String, f64>)>,
 }
 
+/// Where a run stands, given to a progress display after every step (never recorded; the
+/// library does not print it).
+#[derive(Debug, Clone)]
+pub struct Progress<'a> {
+    /// `<name>-<first 12 hex of the experiment hash>`, as the run's file is named.
+    pub run: &'a str,
+    pub time_s: f64,
+    /// `time.end_s`; a cap when [`Self::stops_early`].
+    pub end_s: f64,
+    pub step: u64,
+    pub particles: usize,
+    /// A stop rule (`stop.rest_metric`, `stop.non_flowing_fraction`) may end the run first.
+    pub stops_early: bool,
+}
+
+/// A progress display: called from the thread running the loop, so it must be cheap (or
+/// throttle itself).
+pub type ProgressFn = Arc<dyn Fn(&Progress) + Send + Sync>;
+
 /// What may stop the loop besides the experiment's own end and stop conditions.
-#[derive(Debug, Clone, Default)]
+#[derive(Clone, Default)]
 pub struct LoopControl {
     /// Set from outside (signal handler): stop as "interrupted".
     pub interrupt: Option<Arc<AtomicBool>>,
-    /// Progress lines on stderr.
-    pub progress: bool,
+    /// Told where the run stands after every step.
+    pub progress: Option<ProgressFn>,
     /// Stop as "interrupted" once this step is reached (a replay of an interrupted or cut
     /// short run, or of a segment), at the same point of the loop as a signal would.
     pub stop_at_step: Option<u64>,
@@ -144,7 +163,12 @@ pub fn time_loop<const D: usize>(
     let mut diag_schedule = schedule(m.output.diagnostics_interval_s);
     let mut cloud_schedule = schedule(m.output.cloud_interval_s);
     let mut checkpoint_schedule = schedule(m.output.checkpoint_interval_s);
-    let mut progress_schedule = schedule(end_s / 10.0);
+    let run_label = format!(
+        "{}-{}",
+        m.name,
+        &experiment_sha256[..experiment_sha256.len().min(12)]
+    );
+    let stops_early = m.stop.rest_metric.is_some() || m.stop.non_flowing_fraction.is_some();
     let mut crossings = CrossingTracker::new(m);
     for (t, metrics) in &start.logged_rows {
         crossings.row(*t, |k| metrics.get(k).copied());
@@ -203,11 +227,15 @@ pub fn time_loop<const D: usize>(
                 }
             }
         }
-        if control.progress && progress_schedule.due(t) {
-            eprintln!(
-                "{}: t = {:.4} / {} s, step {}",
-                m.name, t, end_s, solver.step
-            );
+        if let Some(progress) = &control.progress {
+            progress(&Progress {
+                run: &run_label,
+                time_s: t,
+                end_s,
+                step: solver.step,
+                particles: solver.particles.len(),
+                stops_early,
+            });
         }
         // Stop when the remaining time is a negligible sliver of a step (float round-off).
         if end_s - t <= 1e-9 * end_s {

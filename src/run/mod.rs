@@ -9,7 +9,7 @@ pub mod driver;
 pub mod frames;
 
 pub use config::{rheology, solver_config};
-pub use driver::{LoopControl, LoopEnd, LoopStart, Sink, time_loop};
+pub use driver::{LoopControl, LoopEnd, LoopStart, Progress, ProgressFn, Sink, time_loop};
 pub use frames::time_ns;
 
 use crate::experiment::{Resolved, build_scene};
@@ -21,13 +21,13 @@ use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 
 /// How to run (never part of the experiment: none of it changes the state bits).
-#[derive(Debug, Clone, Default)]
+#[derive(Clone, Default)]
 pub struct RunOptions {
     pub out_dir: PathBuf,
     /// Worker threads; None = all cores.
     pub threads: Option<usize>,
-    /// Progress lines on stderr.
-    pub progress: bool,
+    /// Told where the run stands after every step.
+    pub progress: Option<ProgressFn>,
     /// Set from outside (signal handler) to stop the run cleanly as "interrupted".
     pub interrupt: Option<Arc<AtomicBool>>,
     /// Refuse a run whose scene is estimated to hold more particles than this, before
@@ -190,7 +190,7 @@ fn run_in<const D: usize>(
     let started = std::time::Instant::now();
     let control = LoopControl {
         interrupt: options.interrupt.clone(),
-        progress: options.progress,
+        progress: options.progress.clone(),
         stop_at_step: None,
     };
     let end = time_loop(

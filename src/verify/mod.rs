@@ -15,7 +15,7 @@ use std::fmt;
 use std::path::{Path, PathBuf};
 
 /// What to replay.
-#[derive(Debug, Clone, Default)]
+#[derive(Clone, Default)]
 pub struct VerifyOptions {
     /// Start from logged checkpoint K (its state restored) instead of the manifest's initial
     /// scene; checkpoints K+1.. are compared.
@@ -24,8 +24,8 @@ pub struct VerifyOptions {
     pub to: Option<u32>,
     /// Worker threads; None = all cores (the bits never depend on it).
     pub threads: Option<usize>,
-    /// Progress lines on stderr.
-    pub progress: bool,
+    /// Told where the replay stands after every step.
+    pub progress: Option<crate::run::ProgressFn>,
 }
 
 /// The file cannot be used for a replay (exit code 2).
@@ -523,7 +523,7 @@ fn replay<const D: usize>(
     let runs_to_end = to as usize == last && run.complete && outcome != Some("interrupted");
     let control = LoopControl {
         interrupt: None,
-        progress: options.progress,
+        progress: options.progress.clone(),
         stop_at_step: (!runs_to_end).then(|| run.states[to as usize].step),
     };
     let mut sink = Compare {

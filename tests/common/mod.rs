@@ -37,7 +37,7 @@ pub fn run_in(resolved: &Resolved, out_dir: &Path, threads: usize) -> RunResult 
         &RunOptions {
             out_dir: out_dir.to_path_buf(),
             threads: Some(threads),
-            progress: false,
+            progress: None,
             interrupt: None,
             max_particles: None,
             overwrite: false,

@@ -2,6 +2,8 @@
 //! that turns results into exit codes: 0 success, 1 internal or I/O error, 2 bad input (CLI,
 //! manifest, or a run file that is unreadable, incomplete or damaged), 3 simulation failed,
 //! 130 interrupted. `runner verify`: 0 identical, 1 not, 2 the file cannot be used.
+mod progress;
+
 use clap::{Parser, Subcommand};
 use mps_runner::experiment;
 use mps_runner::manifest::sweep;
@@ -843,13 +845,18 @@ fn verify_command(args: VerifyArgs) -> ExitCode {
         Ok(i) => i,
         Err(code) => return code,
     };
+    let display = progress::Display::new(args.quiet);
     let options = VerifyOptions {
         from: args.from,
         to: args.to,
         threads: args.threads,
-        progress: !args.quiet,
+        progress: display.as_ref().map(|d| d.callback()),
     };
-    match verify(&file, &options) {
+    let verified = verify(&file, &options);
+    if let Some(d) = &display {
+        d.finish_all();
+    }
+    match verified {
         Ok(report) => {
             if let Some(w) = &report.build_warning {
                 eprintln!("warning: {w}");
@@ -898,12 +905,17 @@ fn resume_command(file: &std::path::Path, threads: Option<usize>, quiet: bool) -
         }
         FileState::Usable => {}
     }
+    let display = progress::Display::new(quiet);
     let options = ResumeOptions {
         threads,
-        progress: !quiet,
+        progress: display.as_ref().map(|d| d.callback()),
         interrupt: interrupt_flag(),
     };
-    match resume(file, &options) {
+    let resumed = resume(file, &options);
+    if let Some(d) = &display {
+        d.finish_all();
+    }
+    match resumed {
         Ok(r) => {
             eprintln!(
                 "resumed from checkpoint {} (step {}, t = {} s, {} messages copied): {} at t = {} s; wall time {:.2} s",
@@ -1019,7 +1031,7 @@ fn bench_command(
     let options = RunOptions {
         out_dir: out_dir.clone(),
         threads,
-        progress: false,
+        progress: None,
         interrupt: interrupt_flag(),
         max_particles: Some(DEFAULT_MAX_PARTICLES),
         // A benchmark measures; its file is a by-product, replaced by the next one.
@@ -1123,10 +1135,11 @@ fn run_command(args: RunArgs) -> ExitCode {
             return ExitCode::from(EXIT_BAD_INPUT);
         }
     };
+    let display = progress::Display::new(args.quiet);
     let options = RunOptions {
         out_dir: args.out,
         threads: args.threads,
-        progress: !args.quiet,
+        progress: display.as_ref().map(|d| d.callback()),
         interrupt: interrupt_flag(),
         max_particles: Some(args.max_particles),
         overwrite: args.overwrite,
@@ -1141,7 +1154,11 @@ fn run_command(args: RunArgs) -> ExitCode {
             resolved.manifest.time.end_s
         );
     }
-    match run(&resolved, &options) {
+    let result = run(&resolved, &options);
+    if let Some(d) = &display {
+        d.finish_all();
+    }
+    match result {
         Ok(result) => {
             let metric = |k: &str| result.summary.metrics.get(k).copied().unwrap_or(f64::NAN);
             let steps = metric("steps");
@@ -1221,37 +1238,40 @@ fn sweep_command(s: &experiment::Sweep, args: &RunArgs) -> ExitCode {
                 .join(", ")
         );
     }
+    let display = progress::Display::for_sweep(args.quiet, total);
+    let workers = args
+        .threads
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
+        .clamp(1, total.max(1));
+    let finished = std::sync::atomic::AtomicUsize::new(0);
     let options = SweepOptions {
+        progress: display.as_ref().map(|d| d.callback()),
         out_dir: args.out.clone(),
         workers: args.threads,
         interrupt: interrupt_flag(),
         max_particles: Some(args.max_particles),
         overwrite: args.overwrite,
     };
-    let on_done = |o: &mps_runner::sweep_run::PointOutcome| match &o.result {
-        Ok(r) => {
-            let start = match o.start {
-                PointStart::Ran => "",
-                PointStart::Existing => " (its file was there)",
-                PointStart::Resumed => " (resumed)",
-            };
-            println!(
-                "[{}/{total}] {} {} {}{start}",
-                o.index + 1,
-                o.label,
-                r.outcome.as_str(),
-                r.path.display()
-            );
-            if !r.summary.reason.is_empty() && !args.quiet {
-                eprintln!("[{}/{total}] reason: {}", o.index + 1, r.summary.reason);
+    let on_done = |o: &mps_runner::sweep_run::PointOutcome| {
+        let print = || print_point(o, total, args.quiet);
+        match &display {
+            Some(d) => {
+                if let Ok(r) = &o.result
+                    && let Some(stem) = r.path.file_stem()
+                {
+                    d.finished(&stem.to_string_lossy());
+                }
+                d.suspend(print);
+                let done = finished.fetch_add(1, Ordering::Relaxed) + 1;
+                d.point_done(done, total, workers);
             }
-            if !r.stop_reason.is_empty() && !args.quiet {
-                eprintln!("[{}/{total}] stopped: {}", o.index + 1, r.stop_reason);
-            }
+            None => print(),
         }
-        Err(e) => println!("[{}/{total}] {} error {e}", o.index + 1, o.label),
     };
     let (dir, outcomes) = run_sweep(s, &options, &on_done);
+    if let Some(d) = &display {
+        d.finish_all();
+    }
 
     // The sweep plot: x = the first numeric axis, groups = the other axes' values.
     let numeric = |a: &sweep::Axis| a.values.iter().all(serde_json::Value::is_number);
@@ -1298,4 +1318,32 @@ fn sweep_command(s: &experiment::Sweep, args: &RunArgs) -> ExitCode {
         }
     }
     code
+}
+
+/// The line of a finished sweep point: `[i/n] KEY=VALUE... OUTCOME PATH` on stdout; the
+/// reason of a failure or a stop on stderr.
+fn print_point(o: &mps_runner::sweep_run::PointOutcome, total: usize, quiet: bool) {
+    match &o.result {
+        Ok(r) => {
+            let start = match o.start {
+                PointStart::Ran => "",
+                PointStart::Existing => " (its file was there)",
+                PointStart::Resumed => " (resumed)",
+            };
+            println!(
+                "[{}/{total}] {} {} {}{start}",
+                o.index + 1,
+                o.label,
+                r.outcome.as_str(),
+                r.path.display()
+            );
+            if !r.summary.reason.is_empty() && !quiet {
+                eprintln!("[{}/{total}] reason: {}", o.index + 1, r.summary.reason);
+            }
+            if !r.stop_reason.is_empty() && !quiet {
+                eprintln!("[{}/{total}] stopped: {}", o.index + 1, r.stop_reason);
+            }
+        }
+        Err(e) => println!("[{}/{total}] {} error {e}", o.index + 1, o.label),
+    }
 }
