@@ -35,6 +35,71 @@ pub struct SweepOptions {
     /// Run every point again, replacing its file (see [`RunOptions::overwrite`]); the default
     /// takes finished points as they are and resumes interrupted ones.
     pub overwrite: bool,
+    /// Run one slice of the points only (see [`Shard`]); None = all.
+    pub shard: Option<Shard>,
+}
+
+/// Slice `index` (1-based) of `count`: the points whose expansion index k has
+/// k mod count = index - 1. The slices of 1..=count together are every point once, and each
+/// point's file is the same whichever slice ran it (the sweep folder does not depend on it).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Shard {
+    pub index: usize,
+    pub count: usize,
+}
+
+impl Shard {
+    /// Parses `I/N` with 1 <= I <= N.
+    pub fn parse(text: &str) -> Result<Self, String> {
+        let (i, n) = text
+            .split_once('/')
+            .ok_or_else(|| format!("expected I/N (e.g. 2/8), got `{text}`"))?;
+        let number = |s: &str| {
+            s.trim()
+                .parse::<usize>()
+                .map_err(|_| format!("expected I/N with whole numbers, got `{text}`"))
+        };
+        let (index, count) = (number(i)?, number(n)?);
+        if count == 0 || index == 0 || index > count {
+            return Err(format!("expected 1 <= I <= N, got {index}/{count}"));
+        }
+        Ok(Self { index, count })
+    }
+
+    /// From a Slurm job array: task `SLURM_ARRAY_TASK_ID` (counted from
+    /// `SLURM_ARRAY_TASK_MIN`, default 0) of `SLURM_ARRAY_TASK_COUNT`; None when not in one.
+    pub fn from_slurm(env: impl Fn(&str) -> Option<String>) -> Result<Option<Self>, String> {
+        let (Some(id), Some(count)) = (env("SLURM_ARRAY_TASK_ID"), env("SLURM_ARRAY_TASK_COUNT"))
+        else {
+            return Ok(None);
+        };
+        let min = env("SLURM_ARRAY_TASK_MIN").unwrap_or_else(|| "0".into());
+        let number = |name: &str, s: &str| {
+            s.trim()
+                .parse::<usize>()
+                .map_err(|_| format!("{name} = `{s}` is not a whole number"))
+        };
+        let (id, count, min) = (
+            number("SLURM_ARRAY_TASK_ID", &id)?,
+            number("SLURM_ARRAY_TASK_COUNT", &count)?,
+            number("SLURM_ARRAY_TASK_MIN", &min)?,
+        );
+        if id < min || id - min >= count {
+            return Err(format!(
+                "SLURM_ARRAY_TASK_ID = {id} is not one of the {count} tasks from SLURM_ARRAY_TASK_MIN = {min} (the array must be contiguous, e.g. --array=0-{})",
+                count.saturating_sub(1)
+            ));
+        }
+        Ok(Some(Self {
+            index: id - min + 1,
+            count,
+        }))
+    }
+
+    /// Whether the point at expansion index `k` is in this slice.
+    pub fn has(&self, k: usize) -> bool {
+        k % self.count == self.index - 1
+    }
 }
 
 /// How a point's result came about.
@@ -76,7 +141,7 @@ pub fn sweep_dir(out_dir: &Path, sweep: &Sweep) -> PathBuf {
     out_dir.join(sweep.folder_name())
 }
 
-/// Runs every point of `sweep`; `on_done` is called (from a worker thread, one call at a
+/// Runs every point of `sweep` (of its [`SweepOptions::shard`]); `on_done` is called (from a worker thread, one call at a
 /// time) as each point finishes. Returns the folder and the outcomes in expansion order.
 pub fn run_sweep(
     sweep: &Sweep,
@@ -84,7 +149,10 @@ pub fn run_sweep(
     on_done: &(dyn Fn(&PointOutcome) + Sync),
 ) -> (PathBuf, Vec<PointOutcome>) {
     let dir = sweep_dir(&options.out_dir, sweep);
-    let n = sweep.points.len();
+    let mine: Vec<usize> = (0..sweep.points.len())
+        .filter(|&k| options.shard.is_none_or(|s| s.has(k)))
+        .collect();
+    let n = mine.len();
     let workers = options
         .workers
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
@@ -103,10 +171,10 @@ pub fn run_sweep(
         for _ in 0..workers {
             s.spawn(|| {
                 loop {
-                    let index = next.fetch_add(1, Ordering::Relaxed);
-                    let Some(point) = sweep.points.get(index) else {
+                    let Some(&index) = mine.get(next.fetch_add(1, Ordering::Relaxed)) else {
                         break;
                     };
+                    let point = &sweep.points[index];
                     let (result, start) = run_point(&point.resolved, &run_options);
                     let outcome = PointOutcome {
                         index,

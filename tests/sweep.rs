@@ -324,6 +324,7 @@ fn run_sweep_library_and_failed_points() {
         interrupt: None,
         max_particles: None,
         overwrite: false,
+        ..Default::default()
     };
     let (folder, outcomes) = run_sweep(&s, &options, &|_| {});
     assert_eq!(outcomes.iter().map(|o| o.index).collect::<Vec<_>>(), [0, 1]);
@@ -473,6 +474,7 @@ fn a_sweep_run_again_resumes_interrupted_points_and_keeps_finished_ones() {
         interrupt: Some(Arc::new(AtomicBool::new(interrupted))),
         max_particles: None,
         overwrite,
+        ..Default::default()
     };
     let hashes = |outcomes: &[mps_runner::sweep_run::PointOutcome]| -> Vec<Vec<String>> {
         outcomes
@@ -514,4 +516,196 @@ fn a_sweep_run_again_resumes_interrupted_points_and_keeps_finished_ones() {
         assert_eq!(o.start, PointStart::Ran);
     }
     assert_eq!(hashes(&fourth), hashes(&reference));
+}
+
+/// The files of a folder (name -> bytes), `.mcap` only.
+fn run_files(dir: &Path) -> std::collections::BTreeMap<String, Vec<u8>> {
+    std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|x| x == "mcap"))
+        .map(|p| {
+            (
+                p.file_name().unwrap().to_string_lossy().into_owned(),
+                std::fs::read(&p).unwrap(),
+            )
+        })
+        .collect()
+}
+
+/// Slices of a sweep (`--shard I/N`, or a Slurm job array's variables) run into one folder
+/// give the unsliced sweep's files, byte for byte; bad slices are refused.
+#[test]
+fn shards_together_are_the_whole_sweep_bit_for_bit() {
+    let dir = tempfile::tempdir().unwrap();
+    let section = "sweep:\n  scene.column_width_m: [0.1, 0.15]\n  gravity_m_s2: [9.81, 5]\n";
+    let path = write_sweep(dir.path(), "sweep.yaml", section);
+    let s = sweep_of(&with_section(section), &["time.end_s=0.04"]);
+    let run = |out: &Path, extra: &[&str], env: &[(&str, &str)]| {
+        let mut cmd = runner();
+        cmd.arg(&path)
+            .arg("--out")
+            .arg(out)
+            .args(["--set", "time.end_s=0.04", "--quiet"])
+            .args(extra)
+            .env_remove("SLURM_ARRAY_TASK_ID")
+            .env_remove("SLURM_ARRAY_TASK_COUNT")
+            .env_remove("SLURM_ARRAY_TASK_MIN");
+        for (k, v) in env {
+            cmd.env(k, v);
+        }
+        cmd.output().unwrap()
+    };
+    let whole = dir.path().join("whole");
+    assert!(run(&whole, &[], &[]).status.success());
+    let whole_files = run_files(&whole.join(s.folder_name()));
+    assert_eq!(whole_files.len(), 4);
+
+    // Three slices of four points: 2 + 1 + 1, into one folder.
+    let sliced = dir.path().join("sliced");
+    let mut counts = Vec::new();
+    for i in 1..=3 {
+        let out = run(&sliced, &["--shard", &format!("{i}/3")], &[]);
+        assert!(out.status.success(), "{out:?}");
+        let stdout = String::from_utf8(out.stdout).unwrap();
+        counts.push(stdout.lines().filter(|l| l.contains(" completed ")).count());
+    }
+    assert_eq!(counts, [2, 1, 1]);
+    assert!(
+        run_files(&sliced.join(s.folder_name())) == whole_files,
+        "the slices' files differ from the whole sweep's"
+    );
+    // No sweep plot from a slice.
+    assert!(
+        !std::fs::read_dir(sliced.join(s.folder_name()))
+            .unwrap()
+            .any(|e| e.unwrap().path().extension().is_some_and(|x| x == "svg"))
+    );
+
+    // A Slurm array --array=5-7: task 5 is slice 1/3, the points 1 and 4.
+    let slurm = dir.path().join("slurm");
+    let env = [
+        ("SLURM_ARRAY_TASK_ID", "5"),
+        ("SLURM_ARRAY_TASK_MIN", "5"),
+        ("SLURM_ARRAY_TASK_COUNT", "3"),
+    ];
+    let out = run(&slurm, &[], &env);
+    assert!(out.status.success(), "{out:?}");
+    let got = run_files(&slurm.join(s.folder_name()));
+    let expected: Vec<String> = [0, 3]
+        .iter()
+        .map(|&k| format!("smoke_2d-{}.mcap", &s.points[k].resolved.hash_hex[..12]))
+        .collect();
+    assert_eq!(got.keys().cloned().collect::<Vec<_>>(), {
+        let mut e = expected.clone();
+        e.sort();
+        e
+    });
+    for (name, bytes) in &got {
+        assert!(bytes == &whole_files[name], "{name} differs");
+    }
+
+    // Bad slices: exit 2, named, nothing run.
+    for (extra, env, needle) in [
+        (vec!["--shard", "0/3"], vec![], "1 <= I <= N"),
+        (vec!["--shard", "4/3"], vec![], "1 <= I <= N"),
+        (vec!["--shard", "two"], vec![], "I/N"),
+        (
+            vec![],
+            vec![
+                ("SLURM_ARRAY_TASK_ID", "9"),
+                ("SLURM_ARRAY_TASK_COUNT", "3"),
+            ],
+            "SLURM_ARRAY_TASK_ID",
+        ),
+    ] {
+        let bad = dir.path().join("bad");
+        let out = run(&bad, &extra, &env);
+        assert_eq!(out.status.code(), Some(2), "{out:?}");
+        assert!(
+            String::from_utf8_lossy(&out.stderr).contains(needle),
+            "{out:?}"
+        );
+        assert!(!bad.exists());
+    }
+    let single = runner()
+        .arg(common::experiment("smoke_2d.yaml"))
+        .args(["--shard", "1/2", "--out"])
+        .arg(dir.path().join("single"))
+        .output()
+        .unwrap();
+    assert_eq!(single.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&single.stderr).contains("--shard"));
+}
+
+/// `runner expand`: one manifest per point, each hashing to its point, and a run of one gives
+/// the sweep point's state bits.
+#[test]
+fn expanded_manifests_are_the_sweep_points() {
+    let dir = tempfile::tempdir().unwrap();
+    let section = "sweep:\n  scene.column_width_m: [0.1, 0.15]\n  gravity_m_s2: [9.81, 5]\n";
+    let path = write_sweep(dir.path(), "sweep.yaml", section);
+    let s = sweep_of(&with_section(section), &["time.end_s=0.04"]);
+    let out = dir.path().join("manifests");
+    let assert = runner()
+        .arg("expand")
+        .arg(&path)
+        .args(["--set", "time.end_s=0.04", "--out"])
+        .arg(&out)
+        .assert()
+        .success();
+    let stdout = String::from_utf8(assert.get_output().stdout.clone()).unwrap();
+    let files: Vec<PathBuf> = stdout.lines().map(PathBuf::from).collect();
+    assert_eq!(files.len(), s.points.len());
+    for (file, point) in files.iter().zip(&s.points) {
+        let resolved = experiment::load(file, &[]).unwrap();
+        assert_eq!(resolved.hash_hex, point.resolved.hash_hex);
+        assert!(
+            file.to_string_lossy()
+                .ends_with(&format!("-{}.yaml", &point.resolved.hash_hex[..12]))
+        );
+    }
+    // The second point run from its manifest equals the sweep's run of it.
+    let single = dir.path().join("single");
+    let assert = runner()
+        .arg(&files[1])
+        .arg("--out")
+        .arg(&single)
+        .arg("--quiet")
+        .assert()
+        .success();
+    let single_file = PathBuf::from(
+        String::from_utf8(assert.get_output().stdout.clone())
+            .unwrap()
+            .lines()
+            .last()
+            .unwrap(),
+    );
+    let sweep_out = dir.path().join("runs");
+    runner()
+        .arg(&path)
+        .arg("--out")
+        .arg(&sweep_out)
+        .args(["--set", "time.end_s=0.04", "--quiet"])
+        .assert()
+        .success();
+    let point_file = sweep_out
+        .join(s.folder_name())
+        .join(single_file.file_name().unwrap());
+    // Same experiment, same state bits (the files' metadata differ: each keeps the manifest
+    // text it was run from).
+    let (a, b) = (
+        read_run(&single_file).unwrap(),
+        read_run(&point_file).unwrap(),
+    );
+    let (a, b) = (a.summary.unwrap(), b.summary.unwrap());
+    assert_eq!(a.experiment_sha256, b.experiment_sha256);
+    assert!(!a.checkpoints.is_empty());
+    assert!(a.checkpoints == b.checkpoints, "checkpoint hashes differ");
+    // A manifest without a sweep is refused.
+    runner()
+        .arg("expand")
+        .arg(common::experiment("smoke_2d.yaml"))
+        .assert()
+        .code(2);
 }

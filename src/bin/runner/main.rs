@@ -71,6 +71,11 @@ struct RunArgs {
     /// every summary metric that is not a count or bookkeeping).
     #[arg(long = "plot-y", value_name = "METRIC")]
     plot_y: Vec<String>,
+    /// Sweeps only: run slice I of N (the points whose index k has k mod N = I - 1) into the
+    /// same sweep folder; default in a Slurm job array: SLURM_ARRAY_TASK_ID (from
+    /// SLURM_ARRAY_TASK_MIN) of SLURM_ARRAY_TASK_COUNT. A sliced run draws no sweep plots.
+    #[arg(long, value_name = "I/N", value_parser = mps_runner::sweep_run::Shard::parse)]
+    shard: Option<mps_runner::sweep_run::Shard>,
 }
 
 #[derive(Subcommand, Debug)]
@@ -209,6 +214,17 @@ enum Command {
         /// Keep each figure's SVG beside its PNG.
         #[arg(long)]
         svg: bool,
+    },
+    /// Write one resolved manifest per point of a sweep (its canonical form, which hashes to
+    /// the point's experiment hash) as OUT/<name>-<first 12 hex of its hash>.yaml; prints
+    /// their paths. For running points elsewhere (GNU parallel, a scheduler) one by one
+    Expand {
+        manifest: PathBuf,
+        #[arg(long = "set", value_name = "KEY=VALUE")]
+        set: Vec<String>,
+        /// Folder for the manifests (default: manifests/<name>-sweep-<hash>/).
+        #[arg(long)]
+        out: Option<PathBuf>,
     },
     /// What a run file holds: experiment, outcome, stop rule, build, particles, time,
     /// checkpoints, metrics, channels; for an unfinished or cut file, what is missing (exit 0;
@@ -439,6 +455,7 @@ fn main() -> ExitCode {
                 vec![r.page]
             }))
         }
+        Some(Command::Expand { manifest, set, out }) => expand_command(&manifest, &set, out),
         Some(Command::Info { file, json }) => info_command(&file, json),
         Some(Command::Export {
             path,
@@ -1128,6 +1145,13 @@ fn run_command(args: RunArgs) -> ExitCode {
         return ExitCode::from(EXIT_BAD_INPUT);
     }
     let resolved = match experiment::load_plan(&path, &args.set) {
+        Ok(sweep::Plan::Single(_)) if args.shard.is_some() => {
+            eprintln!(
+                "error: --shard: {} has no sweep: section (only a sweep's points can be sliced)",
+                path.display()
+            );
+            return ExitCode::from(EXIT_BAD_INPUT);
+        }
         Ok(sweep::Plan::Single(r)) => *r,
         Ok(sweep::Plan::Sweep(s)) => return sweep_command(&s, &args),
         Err(e) => {
@@ -1225,17 +1249,43 @@ fn print_run_error(e: &RunError) {
 /// folder, and prints the folder last. Exit 0 when every point completed, 3 when any failed,
 /// 1 when a file could not be written, 130 when interrupted.
 fn sweep_command(s: &experiment::Sweep, args: &RunArgs) -> ExitCode {
-    let total = s.points.len();
+    let shard = match args.shard {
+        Some(shard) => Some(shard),
+        None => match mps_runner::sweep_run::Shard::from_slurm(|k| std::env::var(k).ok()) {
+            Ok(shard) => shard,
+            Err(e) => {
+                eprintln!("error: --shard from the Slurm job array: {e}");
+                return ExitCode::from(EXIT_BAD_INPUT);
+            }
+        },
+    };
+    let total = (0..s.points.len())
+        .filter(|&k| shard.is_none_or(|sh| sh.has(k)))
+        .count();
     if !args.quiet {
         eprintln!(
-            "{}: sweep {} of {total} points over {}",
+            "{}: sweep {} of {} points over {}{}",
             s.name,
             s.hash_hex,
+            s.points.len(),
             s.axes
                 .iter()
                 .map(|a| a.key.as_str())
                 .collect::<Vec<_>>()
-                .join(", ")
+                .join(", "),
+            match shard {
+                Some(sh) => format!(
+                    "; slice {}/{} ({}): {total} of them",
+                    sh.index,
+                    sh.count,
+                    if args.shard.is_some() {
+                        "--shard"
+                    } else {
+                        "Slurm job array"
+                    }
+                ),
+                None => String::new(),
+            }
         );
     }
     let display = progress::Display::for_sweep(args.quiet, total);
@@ -1251,6 +1301,7 @@ fn sweep_command(s: &experiment::Sweep, args: &RunArgs) -> ExitCode {
         interrupt: interrupt_flag(),
         max_particles: Some(args.max_particles),
         overwrite: args.overwrite,
+        shard,
     };
     let on_done = |o: &mps_runner::sweep_run::PointOutcome| {
         let print = || print_point(o, total, args.quiet);
@@ -1273,9 +1324,20 @@ fn sweep_command(s: &experiment::Sweep, args: &RunArgs) -> ExitCode {
         d.finish_all();
     }
 
-    // The sweep plot: x = the first numeric axis, groups = the other axes' values.
+    // The sweep plot: x = the first numeric axis, groups = the other axes' values. Not for a
+    // slice: slices finishing together would write the same plot files.
     let numeric = |a: &sweep::Axis| a.values.iter().all(serde_json::Value::is_number);
-    if let Some(x) = s.axes.iter().find(|a| numeric(a)) {
+    if shard.is_some() && !args.quiet {
+        eprintln!(
+            "no sweep plots for a slice: once every slice is done, `runner report DIR` (or `runner plot-sweep`) plots the whole sweep"
+        );
+    }
+    if let Some(x) = s
+        .axes
+        .iter()
+        .find(|a| numeric(a))
+        .filter(|_| shard.is_none())
+    {
         let others: Vec<&str> = s
             .axes
             .iter()
@@ -1318,6 +1380,52 @@ fn sweep_command(s: &experiment::Sweep, args: &RunArgs) -> ExitCode {
         }
     }
     code
+}
+
+/// `runner expand`: one canonical manifest per sweep point.
+fn expand_command(path: &Path, set: &[String], out: Option<PathBuf>) -> ExitCode {
+    let s = match experiment::load_plan(path, set) {
+        Ok(sweep::Plan::Sweep(s)) => s,
+        Ok(sweep::Plan::Single(_)) => {
+            eprintln!(
+                "error: {} has no sweep: section: it is one experiment already",
+                path.display()
+            );
+            return ExitCode::from(EXIT_BAD_INPUT);
+        }
+        Err(e) => {
+            eprintln!("error: {e}");
+            return ExitCode::from(EXIT_BAD_INPUT);
+        }
+    };
+    let dir = out.unwrap_or_else(|| PathBuf::from("manifests").join(s.folder_name()));
+    if let Err(e) = std::fs::create_dir_all(&dir) {
+        eprintln!("error: cannot create {}: {e}", dir.display());
+        return ExitCode::from(EXIT_INTERNAL);
+    }
+    let n = s.points.len();
+    for (k, point) in s.points.iter().enumerate() {
+        let r = &point.resolved;
+        let file = dir.join(format!("{}-{}.yaml", r.manifest.name, &r.hash_hex[..12]));
+        // JSON is YAML: the canonical form itself, under a comment naming the point.
+        let pretty = serde_json::from_str::<serde_json::Value>(&r.canonical)
+            .and_then(|v| serde_json::to_string_pretty(&v))
+            .expect("the canonical form is JSON");
+        let text = format!(
+            "# Point {}/{n} of sweep {} ({}): {}\n# experiment hash {}\n{pretty}\n",
+            k + 1,
+            s.hash_hex,
+            path.display(),
+            point.label(),
+            r.hash_hex
+        );
+        if let Err(e) = std::fs::write(&file, text) {
+            eprintln!("error: cannot write {}: {e}", file.display());
+            return ExitCode::from(EXIT_INTERNAL);
+        }
+        println!("{}", file.display());
+    }
+    ExitCode::SUCCESS
 }
 
 /// The line of a finished sweep point: `[i/n] KEY=VALUE... OUTCOME PATH` on stdout; the
