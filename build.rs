@@ -29,16 +29,21 @@ fn main() {
         .and_then(|o| String::from_utf8(o.stdout).ok())
         .map(|s| s.trim().to_string())
         .unwrap_or_else(|| "unknown".into());
-    let git_commit = Command::new("git")
-        .args(["rev-parse", "HEAD"])
+    // GIT_OPTIONAL_LOCKS=0: `git status` then does not refresh .git/index, which this script
+    // watches (it would rerun, and the crate rebuild, on every build).
+    let git = |args: &[&str]| {
+        let mut c = Command::new("git");
+        c.args(args).env("GIT_OPTIONAL_LOCKS", "0");
+        c
+    };
+    let git_commit = git(&["rev-parse", "HEAD"])
         .output()
         .ok()
         .filter(|o| o.status.success())
         .and_then(|o| String::from_utf8(o.stdout).ok())
         .map(|s| s.trim().to_string())
         .unwrap_or_default();
-    let dirty = Command::new("git")
-        .args(["status", "--porcelain", "--untracked-files=no"])
+    let dirty = git(&["status", "--porcelain", "--untracked-files=no"])
         .output()
         .ok()
         .filter(|o| o.status.success())
@@ -62,6 +67,26 @@ fn main() {
             ""
         }
     );
-    println!("cargo:rerun-if-changed=.git/HEAD");
-    println!("cargo:rerun-if-changed=.git/index");
+    // The commit: HEAD names the branch, whose ref file (or packed-refs) holds it. Dirty or
+    // not: the sources. Not .git/index, which any `git status` rewrites (every build after
+    // one would rebuild the crate).
+    // (A path that does not exist would rerun it every time: packed-refs only when there.)
+    for watched in [
+        ".git/HEAD",
+        ".git/packed-refs",
+        "src",
+        "Cargo.toml",
+        "Cargo.lock",
+        "build.rs",
+    ] {
+        if std::path::Path::new(watched).exists() {
+            println!("cargo:rerun-if-changed={watched}");
+        }
+    }
+    if let Ok(head) = fs::read_to_string(".git/HEAD")
+        && let Some(branch) = head.trim().strip_prefix("ref: ")
+        && std::path::Path::new(".git").join(branch).exists()
+    {
+        println!("cargo:rerun-if-changed=.git/{branch}");
+    }
 }
