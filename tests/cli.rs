@@ -294,3 +294,26 @@ fn progress_is_plain_lines_when_piped_a_bar_on_a_terminal_and_none_when_quiet() 
         "no plain lines on a terminal: {tty}"
     );
 }
+
+/// `runner run MANIFEST` is the same as `runner MANIFEST` (users type it; clap's message
+/// for it was cryptic).
+#[test]
+fn run_as_a_subcommand_is_the_plain_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let exp = common::experiment("smoke_2d.yaml");
+    let out = runner()
+        .arg("run")
+        .arg(&exp)
+        .args(["--set", "time.end_s=0.01", "--quiet", "--out"])
+        .arg(dir.path())
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{out:?}");
+    let resolved = common::resolve("smoke_2d.yaml", &["time.end_s=0.01"]);
+    let path = String::from_utf8(out.stdout).unwrap();
+    assert!(
+        path.trim()
+            .ends_with(&format!("smoke_2d-{}.mcap", &resolved.hash_hex[..12])),
+        "{path}"
+    );
+}

@@ -162,8 +162,15 @@ fn a_run_decodes_as_foxglove_decodes_it_with_plot_paths_equal_to_the_recorded_va
     let logged = read_messages(&path).unwrap();
     let summary = run.summary.clone().unwrap();
     let (layout, layout_paths) = layout();
+    let keys: BTreeSet<&String> = run
+        .diagnostics
+        .iter()
+        .flat_map(|d| d.metrics.keys())
+        .collect();
+    let mut paths = layout_paths.clone();
+    paths.extend(keys.iter().map(|k| format!("/metrics.{k}")));
 
-    let (code, fox) = decode(&path, &layout_paths);
+    let (code, fox) = decode(&path, &paths);
     assert_eq!(code, Some(0), "decode.js reports a problem: {fox:#}");
     assert_eq!(fox["ok"], true);
     assert_eq!(fox["decoder"]["reader"], "indexed");
@@ -178,6 +185,7 @@ fn a_run_decodes_as_foxglove_decodes_it_with_plot_paths_equal_to_the_recorded_va
         ("/particles", "foxglove.PointCloud", run.clouds),
         ("/diagnostics", "mps.v1.Diagnostics", run.diagnostics.len()),
         ("/summary", "mps.v1.Summary", 1),
+        ("/metrics", "mps.v1.run.Metrics", run.diagnostics.len()),
     ];
     let channels = fox["channels"].as_object().unwrap();
     assert_eq!(channels.len(), expected.len(), "{:?}", channels.keys());
@@ -261,19 +269,17 @@ fn a_run_decodes_as_foxglove_decodes_it_with_plot_paths_equal_to_the_recorded_va
         assert_series(&fox, &format!("/diagnostics.{name}"), &series);
     }
 
-    // Every experiment metric plots by its key, with the recorded bits; the object-style path
-    // (`.metrics.front_position_m`) finds nothing in these viewers.
-    let keys: BTreeSet<&String> = run
-        .diagnostics
-        .iter()
-        .flat_map(|d| d.metrics.keys())
-        .collect();
+    // Every experiment metric plots by the simple path `/metrics.<name>` (the /metrics channel,
+    // one field per metric) and by its key in the map, with the recorded bits at the same log
+    // times; the object-style path into the map (`.metrics.front_position_m`) finds nothing in
+    // these viewers, which is why /metrics exists.
     assert!(keys.contains(&"front_position_m".to_string()), "{keys:?}");
     for key in &keys {
         let series: Vec<(u64, f64)> = diagnostics
             .iter()
             .map(|(t, d)| (*t, d.metrics[key.as_str()]))
             .collect();
+        assert_series(&fox, &format!("/metrics.{key}"), &series);
         assert_series(&fox, &metric_path("/diagnostics", key), &series);
         let naive = plot_path(&fox, &format!("/diagnostics.metrics.{key}"));
         assert_eq!(naive["resolves"], false, "{naive}");
@@ -301,11 +307,7 @@ fn a_run_decodes_as_foxglove_decodes_it_with_plot_paths_equal_to_the_recorded_va
             .iter()
             .any(|p| p == "/diagnostics.kinetic_energy_j")
     );
-    assert!(
-        layout_paths
-            .iter()
-            .any(|p| p.starts_with("/diagnostics.metrics[:]{key=="))
-    );
+    assert!(layout_paths.iter().any(|p| p.starts_with("/metrics.")));
 
     // /particles: a foxglove.PointCloud the 3D panel draws: x, y, z and the five per-particle
     // fields, FLOAT32 little-endian, at the offsets the Rust side wrote, the same in every frame.
@@ -447,6 +449,7 @@ fn a_killed_runs_partial_file_decodes_with_the_streaming_reader() {
         ("/state", recovered.states.len()),
         ("/particles", recovered.clouds),
         ("/diagnostics", recovered.diagnostics.len()),
+        ("/metrics", recovered.diagnostics.len()),
         ("/summary", 0),
     ] {
         assert_eq!(

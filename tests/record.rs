@@ -243,7 +243,18 @@ fn mcap_layout_as_other_readers_see_it() {
     let mut topics: BTreeMap<String, (String, String, String)> = BTreeMap::new();
     for ch in summary.channels.values() {
         let schema = ch.schema.as_ref().expect("schema");
-        assert_eq!(&schema.data[..], mps_runner::proto::DESCRIPTOR_SET);
+        if ch.topic == "/metrics" {
+            // Made per run: the one message, time_s then the metrics of the first row.
+            let set = <prost_types::FileDescriptorSet as prost::Message>::decode(&schema.data[..])
+                .expect("a FileDescriptorSet");
+            let message = &set.file[0].message_type[0];
+            let names: Vec<&str> = message.field.iter().map(|f| f.name()).collect();
+            let mut expected = vec!["time_s"];
+            expected.extend(w.diagnostics[0].metrics.keys().map(String::as_str));
+            assert_eq!(names, expected);
+        } else {
+            assert_eq!(&schema.data[..], mps_runner::proto::DESCRIPTOR_SET);
+        }
         topics.insert(
             ch.topic.clone(),
             (
@@ -265,10 +276,12 @@ fn mcap_layout_as_other_readers_see_it() {
     expected.insert("/particles".to_string(), pb("foxglove.PointCloud"));
     expected.insert("/diagnostics".to_string(), pb("mps.v1.Diagnostics"));
     expected.insert("/summary".to_string(), pb("mps.v1.Summary"));
+    expected.insert("/metrics".to_string(), pb("mps.v1.run.Metrics"));
     assert_eq!(topics, expected);
 
     let stats = summary.stats.as_ref().unwrap();
-    let total = w.states.len() + w.diagnostics.len() + w.clouds + 1;
+    // /metrics: one message per /diagnostics row.
+    let total = w.states.len() + 2 * w.diagnostics.len() + w.clouds + 1;
     assert_eq!(stats.message_count, total as u64);
     assert_eq!(stats.metadata_count, 4);
     assert_eq!(stats.attachment_count, 1);

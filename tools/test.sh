@@ -9,6 +9,10 @@ if [ ! -x .venv/bin/python ]; then
 fi
 .venv/bin/pip install --quiet --disable-pip-version-check -r tools/requirements.txt
 export MPS_PYTHON="$PWD/.venv/bin/python"
+# The viewers' decoder (protobufjs, @mcap/core) for tests/foxglove.rs, pinned by its lock file.
+if [ ! -d tools/foxglove/node_modules ]; then
+    npm ci --prefix tools/foxglove --no-audit --no-fund --silent
+fi
 cargo test --release -- --include-ignored
 cargo build --release --bin runner
 

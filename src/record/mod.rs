@@ -18,6 +18,7 @@
 
 mod cloud;
 mod error;
+pub mod metrics_channel;
 pub mod read;
 
 use std::collections::BTreeMap;
@@ -29,6 +30,7 @@ use mcap::records::{MessageHeader, Metadata};
 
 pub use cloud::{FRAME_ID, point_cloud, timestamp};
 pub use error::{RecordError, Result};
+pub use metrics_channel::{SCHEMA_METRICS, TOPIC_METRICS};
 pub use read::{FileCheck, Logged, RunFile, Stop, check_run, read_messages, read_run};
 
 use crate::build_info::BuildInfo;
@@ -218,6 +220,9 @@ pub struct Recorder {
     experiment_sha256: String,
     channel_ids: [u16; 4],
     sequences: [u32; 4],
+    /// `/metrics`: added at the first `/diagnostics` row that has metrics (its names make
+    /// the schema); channel id, layout and next sequence number.
+    metrics: Option<(u16, metrics_channel::MetricsLayout, u32)>,
 }
 
 impl Recorder {
@@ -324,6 +329,7 @@ impl Recorder {
             experiment_sha256: header.experiment_sha256.to_string(),
             channel_ids,
             sequences: [0; 4],
+            metrics: None,
         };
         recorder.flush_and_sync()?;
         Ok(recorder)
@@ -357,9 +363,39 @@ impl Recorder {
         self.write(SLOT_PARTICLES, log_time_ns, msg)
     }
 
-    /// Writes a row of the time series on `/diagnostics`.
+    /// Writes a row of the time series on `/diagnostics`, and its experiment metrics on
+    /// `/metrics` (see [`metrics_channel`]).
     pub fn write_diagnostics(&mut self, log_time_ns: u64, msg: &Diagnostics) -> Result<()> {
-        self.write(SLOT_DIAGNOSTICS, log_time_ns, msg)
+        self.write(SLOT_DIAGNOSTICS, log_time_ns, msg)?;
+        if self.metrics.is_none() && !msg.metrics.is_empty() {
+            let layout = metrics_channel::MetricsLayout::new(msg.metrics.keys());
+            if !layout.is_empty() {
+                let writer = self.writer.as_mut().expect("writer present until finish");
+                let schema_id = writer
+                    .add_schema(SCHEMA_METRICS, "protobuf", &layout.descriptor_set())
+                    .map_err(mcap_err(&self.partial))?;
+                let channel_id = writer
+                    .add_channel(schema_id, TOPIC_METRICS, "protobuf", &BTreeMap::new())
+                    .map_err(mcap_err(&self.partial))?;
+                self.metrics = Some((channel_id, layout, 0));
+            }
+        }
+        if let Some((channel_id, layout, sequence)) = &mut self.metrics {
+            let header = MessageHeader {
+                channel_id: *channel_id,
+                sequence: *sequence,
+                log_time: log_time_ns,
+                publish_time: log_time_ns,
+            };
+            let data = layout.encode(msg.time_s, &msg.metrics);
+            self.writer
+                .as_mut()
+                .expect("writer present until finish")
+                .write_to_known_channel(&header, &data)
+                .map_err(mcap_err(&self.partial))?;
+            *sequence += 1;
+        }
+        Ok(())
     }
 
     /// Writes `/summary` and the `outcome` metadata, finishes the MCAP file (summary section

@@ -49,6 +49,9 @@ pub struct RunFile {
     /// For an unfinished file: where and why reading stopped before the end of the file;
     /// `None` when the file ends on a record boundary (a killed run between two chunks).
     pub stop: Option<Stop>,
+    /// Messages per topic on the channels that are not decoded here (`/metrics`: the same
+    /// values as the `/diagnostics` metrics, for viewers).
+    pub other_channels: BTreeMap<String, usize>,
 }
 
 /// Where reading an unfinished file stopped before its end.
@@ -114,6 +117,7 @@ pub fn read_run(path: &Path) -> Result<RunFile> {
     run.metadata = walked.metadata;
     run.complete = walked.complete;
     run.stop = walked.stop;
+    run.other_channels = walked.others;
     Ok(run)
 }
 
@@ -145,6 +149,7 @@ struct Walked {
     metadata: BTreeMap<String, BTreeMap<String, String>>,
     complete: bool,
     stop: Option<Stop>,
+    others: BTreeMap<String, usize>,
 }
 
 /// Opcode, length and end magic framing (MCAP spec: opcode u8, body length u64 LE).
@@ -243,6 +248,8 @@ struct Walker {
     metadata_records: Vec<(u64, u64)>,
     attachments: Vec<(u64, u64)>,
     metadata: BTreeMap<String, BTreeMap<String, String>>,
+    /// Messages per topic on the other channels (counted, not decoded).
+    others: BTreeMap<String, usize>,
 }
 
 /// The one reader of run files: visits every message on our topics in file order, decoded,
@@ -283,11 +290,13 @@ fn walk(path: &Path, mut on_message: impl FnMut(u64, Logged)) -> Result<Walked> 
     };
     let result = walker.records(&buf, header_end, finished, &mut on_message);
     let metadata = std::mem::take(&mut walker.metadata);
+    let others = std::mem::take(&mut walker.others);
     match result {
         Ok(()) => Ok(Walked {
             metadata,
             complete: finished,
             stop: None,
+            others,
         }),
         Err(p) if finished => Err(RecordError::Damaged {
             path: path.to_path_buf(),
@@ -295,6 +304,7 @@ fn walk(path: &Path, mut on_message: impl FnMut(u64, Logged)) -> Result<Walked> 
         }),
         Err(p) => Ok(Walked {
             metadata,
+            others,
             complete: false,
             stop: Some(Stop {
                 at_byte: p.at_byte as u64,
@@ -731,6 +741,7 @@ impl Walker {
         ]
         .into_iter()
         .find(|t| *t == channel.topic) else {
+            *self.others.entry(channel.topic.clone()).or_default() += 1;
             return Ok(None);
         };
         if channel.message_encoding != "protobuf" {

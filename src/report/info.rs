@@ -139,6 +139,7 @@ pub fn run_info(path: &Path, size_bytes: u64, run: &RunFile) -> RunInfo {
     ]
     .into_iter()
     .map(|(t, n)| (t.to_string(), n))
+    .chain(run.other_channels.iter().map(|(t, n)| (t.clone(), *n)))
     .collect();
 
     let mut missing = Vec::new();

@@ -643,6 +643,14 @@ async function main() {
     out.datatype = dt.error ? null : dt.type;
     if (dt.error) out.error = dt.error;
     else if (!dt.plotable) out.error = `${dt.type} is not a plottable type`;
+    else if (kinds.has("bigint")) {
+      out.error = "values arrive as bigint (64-bit integer): the Plot panel converts them with Number()";
+    } else if (!out.resolves && messages.length > 0) {
+      const counts = values.map((v) => (v[2] !== null ? 1 : Array.isArray(v[1]) ? v[1].length : 1));
+      out.error = counts.some((c) => c > 1)
+        ? "several values in a message (the Plot panel draws each)"
+        : "no number in some messages";
+    }
     out.messages = messages.length;
     out.numbers = oneNumber;
     out.items = [...kinds].join(",");
@@ -683,6 +691,7 @@ async function main() {
     if (e.statistics_count !== null && e.statistics_count !== e.messages) summary.ok = false;
   }
   for (const pc of Object.values(summary.point_cloud)) if (pc.problems && pc.problems.length) summary.ok = false;
+  if (run.streamError) summary.ok = false;
   process.stdout.write(toJson(summary) + "\n");
   process.exit(summary.ok ? 0 : 1);
 }

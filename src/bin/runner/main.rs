@@ -80,6 +80,8 @@ struct RunArgs {
 
 #[derive(Subcommand, Debug)]
 enum Command {
+    /// Run an experiment manifest: the same as `runner MANIFEST [OPTIONS]`
+    Run(RunArgs),
     /// Draw the particle set a manifest starts from (walls, dummies, fluid, inlets) as
     /// sections, SVG: in 3D through y = AT_Y from the side and through z = AT_Z from above,
     /// in 2D the plane; prints the files written.
@@ -469,6 +471,7 @@ fn main() -> ExitCode {
             out,
             max_particles,
         }) => calibrate_command(&calibration, out, max_particles),
+        Some(Command::Run(args)) => run_command(args),
         None => run_command(cli.run),
     }
 }
