@@ -174,7 +174,7 @@ fn run_report(path: &Path, options: &ReportOptions) -> Result<Report> {
 
 fn sweep_report(folder: &Path, options: &ReportOptions) -> Result<Report> {
     let (rows, left_out) = finished_rows(folder)?;
-    let table = summary_table(&rows);
+    let mut table = summary_table(&rows);
     let dir = report_dir(folder.join("report"), options)?;
     let mut f = Figures {
         dir: &dir,
@@ -189,6 +189,22 @@ fn sweep_report(folder: &Path, options: &ReportOptions) -> Result<Report> {
     let refs: Vec<_> = rows.iter().map(|r| &r.manifest).collect();
     let varying = crate::verify::trend::varying_keys(&refs);
     let swept: Vec<&String> = varying.iter().collect();
+    // The table in the order of the swept values (numbers as numbers).
+    let sort_columns: Vec<usize> = swept
+        .iter()
+        .filter_map(|k| table.columns.iter().position(|c| c == *k))
+        .collect();
+    table.rows.sort_by(|a, b| {
+        sort_columns
+            .iter()
+            .map(|&c| match (&a[c], &b[c]) {
+                (Cell::Number(x), Cell::Number(y)) => x.total_cmp(y),
+                (Cell::Text(x), Cell::Text(y)) => x.cmp(y),
+                _ => std::cmp::Ordering::Equal,
+            })
+            .find(|o| o.is_ne())
+            .unwrap_or(std::cmp::Ordering::Equal)
+    });
     let numeric = |c: usize| table.rows.iter().all(|r| matches!(r[c], Cell::Number(_)));
     let x = swept
         .iter()
