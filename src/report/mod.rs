@@ -247,7 +247,15 @@ pub fn plot_run(
     };
     plot::line_plot(
         &out,
-        &format!("{}: {}", run_title(&run), metrics.join(", ")),
+        &format!("{}: {}", run_title(&run), {
+            // A title that fits the figure; the legend names every line.
+            let all = metrics.join(", ");
+            if all.len() <= 60 {
+                all
+            } else {
+                format!("{} and {} more", metrics[0], metrics.len() - 1)
+            }
+        }),
         &axis_label(x),
         &y_label,
         &series,
