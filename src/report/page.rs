@@ -57,14 +57,25 @@ pub fn report(path: &Path, options: &ReportOptions) -> Result<Report> {
 }
 
 /// The figures drawn so far: each SVG turned into a PNG (the SVG kept only on request).
-struct Figures<'a> {
-    dir: &'a Path,
+struct Figures {
+    dir: PathBuf,
     keep_svg: bool,
     done: Vec<Figure>,
     skipped: Vec<String>,
 }
 
-impl Figures<'_> {
+impl Figures {
+    /// Writes the page (`body`, then the figures) and says what the report holds.
+    fn finish(self, title: &str, body: &str) -> Result<Report> {
+        let page = write_page(&self.dir, title, body, &self.done, &self.skipped)?;
+        Ok(Report {
+            dir: self.dir,
+            page,
+            figures: self.done,
+            skipped: self.skipped,
+        })
+    }
+
     fn svg(&self, name: &str) -> PathBuf {
         self.dir.join(format!("{name}.svg"))
     }
@@ -95,7 +106,7 @@ fn run_report(path: &Path, options: &ReportOptions) -> Result<Report> {
     let info = run_info(path, size, &run);
     let dir = report_dir(super::beside(path, "-report"), options)?;
     let mut f = Figures {
-        dir: &dir,
+        dir,
         keep_svg: options.keep_svg,
         done: Vec::new(),
         skipped: Vec::new(),
@@ -162,14 +173,7 @@ fn run_report(path: &Path, options: &ReportOptions) -> Result<Report> {
     let mut body = String::new();
     facts_html(&mut body, &info);
     metrics_html(&mut body, &info);
-    let page = write_page(&dir, &title, &body, &f.done, &f.skipped)?;
-    let (figures, skipped) = (f.done, f.skipped);
-    Ok(Report {
-        dir,
-        page,
-        figures,
-        skipped,
-    })
+    f.finish(&title, &body)
 }
 
 fn sweep_report(folder: &Path, options: &ReportOptions) -> Result<Report> {
@@ -177,7 +181,7 @@ fn sweep_report(folder: &Path, options: &ReportOptions) -> Result<Report> {
     let mut table = summary_table(&rows);
     let dir = report_dir(folder.join("report"), options)?;
     let mut f = Figures {
-        dir: &dir,
+        dir,
         keep_svg: options.keep_svg,
         done: Vec::new(),
         skipped: left_out
@@ -245,14 +249,7 @@ fn sweep_report(folder: &Path, options: &ReportOptions) -> Result<Report> {
         esc(&folder.display().to_string())
     );
     table_html(&mut body, &table);
-    let page = write_page(&dir, &title, &body, &f.done, &f.skipped)?;
-    let (figures, skipped) = (f.done, f.skipped);
-    Ok(Report {
-        dir,
-        page,
-        figures,
-        skipped,
-    })
+    f.finish(&title, &body)
 }
 
 /// Diagnostics metrics drawn together: names that differ only in their last word before the
