@@ -239,26 +239,7 @@ fn export_of_a_run_as_csv_and_json() {
 #[test]
 fn export_of_a_sweep_folder_has_a_row_per_run_with_the_swept_values() {
     let dir = tempfile::tempdir().unwrap();
-    let text = std::fs::read_to_string(common::experiment("smoke_2d.yaml")).unwrap();
-    let manifest = dir.path().join("sweep.yaml");
-    std::fs::write(
-        &manifest,
-        format!("{text}\nsweep:\n  scene.column_width_m: [0.1, 0.15]\n"),
-    )
-    .unwrap();
-    let out = dir.path().join("runs");
-    let (code, stdout, err) = runner(&[
-        manifest.as_os_str(),
-        "--out".as_ref(),
-        out.as_os_str(),
-        "--set".as_ref(),
-        "time.end_s=0.04".as_ref(),
-        "--quiet".as_ref(),
-        "--threads".as_ref(),
-        "2".as_ref(),
-    ]);
-    assert_eq!(code, Some(0), "{err}");
-    let folder = PathBuf::from(stdout.lines().last().unwrap());
+    let folder = common::smoke_sweep_folder(dir.path());
 
     let (code, csv, err) = runner(&["export".as_ref(), folder.as_os_str(), "--csv".as_ref()]);
     assert_eq!(code, Some(0), "{err}");

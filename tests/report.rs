@@ -137,24 +137,7 @@ fn a_run_report_is_one_page_with_its_figures_embedded() {
 #[test]
 fn a_sweep_report_plots_each_metric_against_the_swept_value() {
     let dir = tempfile::tempdir().unwrap();
-    let text = std::fs::read_to_string(common::experiment("smoke_2d.yaml")).unwrap();
-    let manifest = dir.path().join("sweep.yaml");
-    std::fs::write(
-        &manifest,
-        format!("{text}\nsweep:\n  scene.column_width_m: [0.1, 0.15]\n"),
-    )
-    .unwrap();
-    let out = dir.path().join("runs");
-    let (code, stdout, err) = runner(&[
-        manifest.as_os_str(),
-        "--out".as_ref(),
-        out.as_os_str(),
-        "--set".as_ref(),
-        "time.end_s=0.04".as_ref(),
-        "--quiet".as_ref(),
-    ]);
-    assert_eq!(code, Some(0), "{err}");
-    let folder = PathBuf::from(stdout.lines().last().unwrap());
+    let folder = common::smoke_sweep_folder(dir.path());
     let (code, stdout, stderr) = runner(&["report".as_ref(), folder.as_os_str()]);
     assert_eq!(code, Some(0), "{stderr}");
     let page = PathBuf::from(stdout.trim());

@@ -93,3 +93,28 @@ pub fn runner_all<S: AsRef<std::ffi::OsStr>>(args: &[S]) -> (Option<i32>, String
         String::from_utf8_lossy(&out.stderr).into_owned(),
     )
 }
+
+/// A finished 2-point sweep of smoke_2d (`scene.column_width_m` 0.1 and 0.15, 0.04 s) run by
+/// the binary in `dir`; returns the sweep folder.
+pub fn smoke_sweep_folder(dir: &Path) -> PathBuf {
+    let text = std::fs::read_to_string(experiment("smoke_2d.yaml")).unwrap();
+    let manifest = dir.join("sweep.yaml");
+    std::fs::write(
+        &manifest,
+        format!("{text}\nsweep:\n  scene.column_width_m: [0.1, 0.15]\n"),
+    )
+    .unwrap();
+    let out = dir.join("runs");
+    let (code, stdout, err) = runner_all(&[
+        manifest.as_os_str(),
+        "--out".as_ref(),
+        out.as_os_str(),
+        "--set".as_ref(),
+        "time.end_s=0.04".as_ref(),
+        "--quiet".as_ref(),
+        "--threads".as_ref(),
+        "2".as_ref(),
+    ]);
+    assert_eq!(code, Some(0), "{err}");
+    PathBuf::from(stdout.lines().last().unwrap())
+}
