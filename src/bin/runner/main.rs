@@ -2,6 +2,7 @@
 //! that turns results into exit codes: 0 success, 1 internal or I/O error, 2 bad input (CLI,
 //! manifest, or a run file that is unreadable, incomplete or damaged), 3 simulation failed,
 //! 130 interrupted. `runner verify`: 0 identical, 1 not, 2 the file cannot be used.
+mod bench_suite;
 mod progress;
 
 use clap::{Parser, Subcommand};
@@ -112,16 +113,32 @@ enum Command {
         canonical: bool,
     },
     /// Run an experiment (recorded as usual) and report particle-steps per second and the
-    /// wall time split by solver stage and recording.
+    /// wall time split by solver stage and recording; or, with --suite FILE, run a benchmark
+    /// suite (each case in a child process) and print Markdown tables of the results.
     Bench {
-        manifest: PathBuf,
-        #[arg(long = "set", value_name = "KEY=VALUE")]
+        #[arg(required_unless_present = "suite", conflicts_with = "suite")]
+        manifest: Option<PathBuf>,
+        #[arg(long = "set", value_name = "KEY=VALUE", conflicts_with = "suite")]
         set: Vec<String>,
+        /// Worker threads (with --suite: passed to every case).
         #[arg(long, value_parser = threads_arg)]
         threads: Option<usize>,
         /// Keep the MCAP file in this directory (default: a temporary one, removed).
-        #[arg(long)]
+        #[arg(long, conflicts_with = "suite")]
         out: Option<PathBuf>,
+        /// Benchmark suite file (e.g. benchmarks/suite.yaml): its cases and scaling series.
+        #[arg(long, value_name = "FILE")]
+        suite: Option<PathBuf>,
+        /// With --suite: add each case's quick_set (shorter runs).
+        #[arg(long, conflicts_with = "manifest")]
+        quick: bool,
+        /// With --suite: the runner binary to measure (default: this one), e.g. an older
+        /// build for before/after numbers.
+        #[arg(long, value_name = "PATH", conflicts_with = "manifest")]
+        runner: Option<PathBuf>,
+        /// With --suite: also write the Markdown tables to this file.
+        #[arg(long, value_name = "OUT.md", conflicts_with = "manifest")]
+        markdown: Option<PathBuf>,
     },
     /// Replay a run from the manifest stored in its MCAP file and compare every checkpoint
     /// bit for bit (exit 0 identical, 1 not, 2 file unusable); or, with --trend DIR, check
@@ -367,7 +384,21 @@ fn main() -> ExitCode {
             set,
             threads,
             out,
-        }) => bench_command(&manifest, &set, threads, out),
+            suite,
+            quick,
+            runner,
+            markdown,
+        }) => match (suite, manifest) {
+            (Some(suite), _) => bench_suite::suite_command(bench_suite::SuiteArgs {
+                suite,
+                quick,
+                runner,
+                threads,
+                markdown,
+            }),
+            (None, Some(manifest)) => bench_command(&manifest, &set, threads, out),
+            (None, None) => unreachable!("clap requires MANIFEST without --suite"),
+        },
         Some(Command::Verify(args)) => verify_command(args),
         Some(Command::Resume {
             file,
