@@ -73,6 +73,7 @@ impl Neighbours {
         keep: impl Fn(usize) -> bool + Sync,
     ) -> (Self, Self) {
         debug_assert!(inner_m <= outer_m);
+        let (outer2, inner2) = (sqrt_threshold(outer_m), sqrt_threshold(inner_m));
         let n = self.offsets.len() - 1;
         type Cut = (Vec<usize>, Vec<u32>);
         let chunks: Vec<(Cut, Cut)> = (0..n.div_ceil(FILTER_CHUNK))
@@ -90,11 +91,12 @@ impl Neighbours {
                     let before = (len_outer, len_inner);
                     if keep(i) {
                         for &j in self.of(i) {
-                            let d = self.displacement(positions, i, j as usize).norm();
+                            // |r| < radius exactly when |r|^2 < the radius' threshold.
+                            let d2 = self.displacement(positions, i, j as usize).norm_squared();
                             outer[len_outer] = j;
                             inner[len_inner] = j;
-                            len_outer += usize::from(d > 0.0 && d < outer_m);
-                            len_inner += usize::from(d > 0.0 && d < inner_m);
+                            len_outer += usize::from(d2 > 0.0 && d2 < outer2);
+                            len_inner += usize::from(d2 > 0.0 && d2 < inner2);
                         }
                     }
                     counts_outer.push(len_outer - before.0);
@@ -308,6 +310,20 @@ impl Neighbours {
     }
 }
 
+/// The smallest t with sqrt(t) >= radius_m: for d2 >= 0, sqrt(d2) < radius_m exactly when
+/// d2 < t (sqrt is correctly rounded, hence monotone), so a cut on |r|^2 keeps the same pairs
+/// as a cut on |r| = sqrt(|r|^2) without a square root per pair.
+pub fn sqrt_threshold(radius_m: f64) -> f64 {
+    let mut t = radius_m * radius_m;
+    while t.sqrt() < radius_m {
+        t = t.next_up();
+    }
+    while t.next_down().sqrt() >= radius_m {
+        t = t.next_down();
+    }
+    t
+}
+
 /// The pairs of the (Verlet) lists that carry weight at the current positions, one list per
 /// kernel radius: `near` within the number-density/gradient radius, `lap` within the Laplacian
 /// radius. Same order as the lists they come from.
@@ -351,6 +367,29 @@ impl KernelPairs {
         Self {
             near: fluid_near.merged(&wall_near),
             lap: fluid_lap.merged(&wall_lap),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The squared cut keeps exactly the distances the square-root cut keeps, at the edge too.
+    #[test]
+    fn squared_cut_equals_distance_cut() {
+        for k in 1..2000 {
+            let radius = 0.001 * k as f64 * 3.1;
+            let t = sqrt_threshold(radius);
+            assert!(t.sqrt() >= radius && t.next_down().sqrt() < radius);
+            let mut d2 = t;
+            for _ in 0..8 {
+                d2 = d2.next_down();
+            }
+            for _ in 0..16 {
+                assert_eq!(d2 < t, d2.sqrt() < radius, "radius {radius}, d2 {d2}");
+                d2 = d2.next_up();
+            }
         }
     }
 }

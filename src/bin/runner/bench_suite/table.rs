@@ -108,7 +108,7 @@ fn memory_line(points: &[ScalePoint]) -> Option<(f64, f64)> {
         xy.iter().map(|p| p.0).sum::<f64>() / n,
         xy.iter().map(|p| p.1).sum::<f64>() / n,
     );
-    let sxx: f64 = xy.iter().map(|p| (p.0 - mx).powi(2)).sum();
+    let sxx: f64 = xy.iter().map(|p| (p.0 - mx) * (p.0 - mx)).sum();
     let sxy: f64 = xy.iter().map(|p| (p.0 - mx) * (p.1 - my)).sum();
     (xy.len() >= 2 && sxx > 0.0).then(|| (sxy / sxx, my - sxy / sxx * mx))
 }
