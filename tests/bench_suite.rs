@@ -261,3 +261,21 @@ fn a_missing_suite_file_is_bad_input() {
         "{stderr}"
     );
 }
+
+#[test]
+fn case_option_runs_only_the_named_cases() {
+    let dir = tempfile::tempdir().unwrap();
+    let suite = tiny_suite(dir.path());
+    let suite = suite.to_str().unwrap();
+    let (code, stdout, stderr) =
+        common::runner_all(&["bench", "--suite", suite, "--case", "scaling"]);
+    assert_eq!(code, Some(0), "{stderr}");
+    assert!(!stdout.contains("| case |"), "no case was named: {stdout}");
+    assert!(stdout.contains("| spacing m |"), "{stdout}");
+    let (code, _, stderr) = common::runner_all(&["bench", "--suite", suite, "--case", "nope"]);
+    assert_eq!(code, Some(2));
+    assert!(
+        stderr.contains("--case: no case `nope`") && stderr.contains("scaling"),
+        "{stderr}"
+    );
+}

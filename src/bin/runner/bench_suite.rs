@@ -31,6 +31,8 @@ pub struct SuiteArgs {
     pub runner: Option<PathBuf>,
     pub threads: Option<usize>,
     pub markdown: Option<PathBuf>,
+    /// Only these cases (`scaling` for the scaling series); empty = all.
+    pub cases: Vec<String>,
 }
 
 /// The binary that runs the cases, as shown in the commands.
@@ -45,6 +47,13 @@ pub fn suite_command(args: SuiteArgs) -> ExitCode {
         Ok(s) => s,
         Err(e) => {
             eprintln!("error: {e}");
+            return ExitCode::from(EXIT_BAD_INPUT);
+        }
+    };
+    let suite = match only_cases(suite, &args.cases) {
+        Ok(s) => s,
+        Err(why) => {
+            eprintln!("error: --case: {why}");
             return ExitCode::from(EXIT_BAD_INPUT);
         }
     };
@@ -79,6 +88,29 @@ pub fn suite_command(args: SuiteArgs) -> ExitCode {
     } else {
         ExitCode::from(EXIT_SIM_FAILED)
     }
+}
+
+/// The suite cut to the cases named by `--case` (all when none is named); `scaling` names the
+/// scaling series. An unknown name is refused with the names there are.
+fn only_cases(mut suite: Suite, names: &[String]) -> Result<Suite, String> {
+    if names.is_empty() {
+        return Ok(suite);
+    }
+    let known: Vec<&str> = suite.cases.iter().map(|c| c.name.as_str()).collect();
+    if let Some(bad) = names
+        .iter()
+        .find(|n| *n != "scaling" && !known.contains(&n.as_str()))
+    {
+        return Err(format!(
+            "no case `{bad}` in the suite (cases: {}, scaling)",
+            known.join(", ")
+        ));
+    }
+    suite.cases.retain(|c| names.contains(&c.name));
+    if !names.iter().any(|n| n == "scaling") {
+        suite.scaling = None;
+    }
+    Ok(suite)
 }
 
 /// `--runner PATH` (checked by running its `--version`, which also gives its build line), or

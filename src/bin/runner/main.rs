@@ -139,6 +139,9 @@ enum Command {
         /// With --suite: also write the Markdown tables to this file.
         #[arg(long, value_name = "OUT.md", conflicts_with = "manifest")]
         markdown: Option<PathBuf>,
+        /// With --suite: run only this case (repeatable; `scaling` for the scaling series).
+        #[arg(long = "case", value_name = "NAME", conflicts_with = "manifest")]
+        cases: Vec<String>,
     },
     /// Replay a run from the manifest stored in its MCAP file and compare every checkpoint
     /// bit for bit (exit 0 identical, 1 not, 2 file unusable); or, with --trend DIR, check
@@ -388,6 +391,7 @@ fn main() -> ExitCode {
             quick,
             runner,
             markdown,
+            cases,
         }) => match (suite, manifest) {
             (Some(suite), _) => bench_suite::suite_command(bench_suite::SuiteArgs {
                 suite,
@@ -395,6 +399,7 @@ fn main() -> ExitCode {
                 runner,
                 threads,
                 markdown,
+                cases,
             }),
             (None, Some(manifest)) => bench_command(&manifest, &set, threads, out),
             (None, None) => unreachable!("clap requires MANIFEST without --suite"),
