@@ -72,11 +72,31 @@ impl Neighbours {
         inner_m: f64,
         keep: impl Fn(usize) -> bool + Sync,
     ) -> (Self, Self) {
+        self.within_two_by(
+            positions,
+            outer_m,
+            inner_m,
+            |i| if keep(i) { Cut::Always } else { Cut::Never },
+            |_| false,
+        )
+    }
+
+    /// As [`Neighbours::within_two`], each particle cut as `cut(i)` says; a
+    /// [`Cut::IfFluidWithin`] particle keeps its pairs only when one of them within `outer_m`
+    /// is fluid (`is_fluid`).
+    fn within_two_by<const D: usize>(
+        &self,
+        positions: &[Vector<D>],
+        outer_m: f64,
+        inner_m: f64,
+        cut: impl Fn(usize) -> Cut + Sync,
+        is_fluid: impl Fn(usize) -> bool + Sync,
+    ) -> (Self, Self) {
         debug_assert!(inner_m <= outer_m);
         let (outer2, inner2) = (sqrt_threshold(outer_m), sqrt_threshold(inner_m));
         let n = self.offsets.len() - 1;
-        type Cut = (Vec<usize>, Vec<u32>);
-        let chunks: Vec<(Cut, Cut)> = (0..n.div_ceil(FILTER_CHUNK))
+        type Chunk = (Vec<usize>, Vec<u32>);
+        let chunks: Vec<(Chunk, Chunk)> = (0..n.div_ceil(FILTER_CHUNK))
             .into_par_iter()
             .with_max_len(1)
             .map(|chunk| {
@@ -89,14 +109,24 @@ impl Neighbours {
                 let (mut len_outer, mut len_inner) = (0, 0);
                 for i in range {
                     let before = (len_outer, len_inner);
-                    if keep(i) {
+                    let how = cut(i);
+                    if how != Cut::Never {
+                        let check = how == Cut::IfFluidWithin;
+                        let mut fluid_within = false;
                         for &j in self.of(i) {
                             // |r| < radius exactly when |r|^2 < the radius' threshold.
                             let d2 = self.displacement(positions, i, j as usize).norm_squared();
                             outer[len_outer] = j;
                             inner[len_inner] = j;
-                            len_outer += usize::from(d2 > 0.0 && d2 < outer2);
+                            let in_outer = d2 > 0.0 && d2 < outer2;
+                            len_outer += usize::from(in_outer);
                             len_inner += usize::from(d2 > 0.0 && d2 < inner2);
+                            if check && in_outer {
+                                fluid_within |= is_fluid(j as usize);
+                            }
+                        }
+                        if check && !fluid_within {
+                            (len_outer, len_inner) = before;
                         }
                     }
                     counts_outer.push(len_outer - before.0);
@@ -107,7 +137,7 @@ impl Neighbours {
                 ((counts_outer, outer), (counts_inner, inner))
             })
             .collect();
-        let (outer, inner): (Vec<Cut>, Vec<Cut>) = chunks.into_iter().unzip();
+        let (outer, inner): (Vec<Chunk>, Vec<Chunk>) = chunks.into_iter().unzip();
         (
             Self::from_chunks(outer_m, self.period_x_m, outer),
             Self::from_chunks(inner_m, self.period_x_m, inner),
@@ -180,6 +210,22 @@ impl Neighbours {
         Self::build_general(positions, cutoff_m, Some(period_x_m), &|_| true, &|_| true)
     }
 
+    /// Lists for the particles with `centre(i)`, then for those with `then(i)` that the
+    /// first lists hold, merged row by row (walls near the fluid: one cell grid for both).
+    pub fn build_centres_then_listed<const D: usize>(
+        positions: &[Vector<D>],
+        cutoff_m: f64,
+        active: impl Fn(usize) -> bool + Sync,
+        centre: impl Fn(usize) -> bool + Sync,
+        then: impl Fn(usize) -> bool + Sync,
+    ) -> Self {
+        let grid = CellGrid::new(positions, cutoff_m, None);
+        let first = grid.lists(positions, &active, &centre);
+        let listed = first.listed(positions.len());
+        let second = grid.lists(positions, &active, &|i: usize| listed[i] && then(i));
+        first.merged(&second)
+    }
+
     fn build_general<const D: usize>(
         positions: &[Vector<D>],
         cutoff_m: f64,
@@ -187,17 +233,27 @@ impl Neighbours {
         active: &(impl Fn(usize) -> bool + Sync),
         centre: &(impl Fn(usize) -> bool + Sync),
     ) -> Self {
-        let n = positions.len();
-        if n == 0 {
-            return Self {
-                cutoff_m,
-                period_x_m,
-                offsets: vec![0],
-                indices: Vec::new(),
-            };
-        }
-        let mut lo = positions[0];
-        let mut hi = positions[0];
+        CellGrid::new(positions, cutoff_m, period_x_m).lists(positions, active, centre)
+    }
+}
+
+/// Particles sorted into cells at least one cutoff wide (counting sort: ascending index
+/// within a cell).
+struct CellGrid<const D: usize> {
+    cutoff_m: f64,
+    period_x_m: Option<f64>,
+    lo: Vector<D>,
+    dims: [usize; D],
+    width: [f64; D],
+    /// The particles of flat cell c are `sorted[start[c]..start[c + 1]]`.
+    start: Vec<usize>,
+    sorted: Vec<u32>,
+}
+
+impl<const D: usize> CellGrid<D> {
+    fn new(positions: &[Vector<D>], cutoff_m: f64, period_x_m: Option<f64>) -> Self {
+        let mut lo = positions.first().copied().unwrap_or_else(Vector::<D>::zeros);
+        let mut hi = lo;
         for p in positions {
             lo = lo.inf(p);
             hi = hi.sup(p);
@@ -212,24 +268,20 @@ impl Neighbours {
             dims[0] = (period / cutoff_m).floor() as usize;
             width[0] = period / dims[0] as f64;
         }
-        let cell_of = |p: &Vector<D>| -> [usize; D] {
-            let mut c = [0usize; D];
-            for a in 0..D {
-                c[a] = (((p[a] - lo[a]) / width[a]).floor() as usize).min(dims[a] - 1);
-            }
-            c
-        };
-        let wrap = period_x_m.is_some();
-        let flat = |c: &[usize; D]| -> usize {
-            let mut f = 0;
-            for a in (0..D).rev() {
-                f = f * dims[a] + c[a];
-            }
-            f
+        let mut grid = Self {
+            cutoff_m,
+            period_x_m,
+            lo,
+            dims,
+            width,
+            start: Vec::new(),
+            sorted: Vec::new(),
         };
         let cell_count: usize = dims.iter().product();
-        // Counting sort of particle indices by cell: stable, so ascending index within a cell.
-        let cells: Vec<usize> = positions.par_iter().map(|p| flat(&cell_of(p))).collect();
+        let cells: Vec<usize> = positions
+            .par_iter()
+            .map(|p| grid.flat(&grid.cell_of(p)))
+            .collect();
         let mut start = vec![0usize; cell_count + 1];
         for &c in &cells {
             start[c + 1] += 1;
@@ -238,20 +290,58 @@ impl Neighbours {
             start[c + 1] += start[c];
         }
         let mut fill = start.clone();
-        let mut sorted = vec![0u32; n];
+        let mut sorted = vec![0u32; positions.len()];
         for (i, &c) in cells.iter().enumerate() {
             sorted[fill[c]] = i as u32;
             fill[c] += 1;
         }
+        grid.start = start;
+        grid.sorted = sorted;
+        grid
+    }
 
+    fn cell_of(&self, p: &Vector<D>) -> [usize; D] {
+        let mut c = [0usize; D];
+        for a in 0..D {
+            c[a] = (((p[a] - self.lo[a]) / self.width[a]).floor() as usize).min(self.dims[a] - 1);
+        }
+        c
+    }
+
+    fn flat(&self, c: &[usize; D]) -> usize {
+        let mut f = 0;
+        for a in (0..D).rev() {
+            f = f * self.dims[a] + c[a];
+        }
+        f
+    }
+
+    /// All active j != i closer than the cutoff, for every i with `active(i) && centre(i)`.
+    fn lists(
+        &self,
+        positions: &[Vector<D>],
+        active: &(impl Fn(usize) -> bool + Sync),
+        centre: &(impl Fn(usize) -> bool + Sync),
+    ) -> Neighbours {
+        let n = positions.len();
+        let (cutoff_m, period_x_m) = (self.cutoff_m, self.period_x_m);
+        if n == 0 {
+            return Neighbours {
+                cutoff_m,
+                period_x_m,
+                offsets: vec![0],
+                indices: Vec::new(),
+            };
+        }
         let cutoff2 = cutoff_m * cutoff_m;
-        let image = Self {
+        let image = Neighbours {
             cutoff_m,
             period_x_m,
             offsets: Vec::new(),
             indices: Vec::new(),
         };
-        let self_displacement = |j: usize, i: usize| image.displacement(positions, i, j);
+        let wrap = period_x_m.is_some();
+        let (dims, start, sorted) = (&self.dims, &self.start, &self.sorted);
         let chunks: Vec<(Vec<usize>, Vec<u32>)> = (0..n.div_ceil(LIST_CHUNK))
             .into_par_iter()
             .with_max_len(1)
@@ -266,7 +356,7 @@ impl Neighbours {
                         continue;
                     }
                     let pi = positions[i];
-                    let ci = cell_of(&pi);
+                    let ci = self.cell_of(&pi);
                     // Visit the 3^D surrounding cells in a fixed (flat) order.
                     for k in 0..3usize.pow(D as u32) {
                         let mut rest = k;
@@ -288,11 +378,14 @@ impl Neighbours {
                         if !inside {
                             continue;
                         }
-                        let f = flat(&c);
+                        let f = self.flat(&c);
                         for &j in &sorted[start[f]..start[f + 1]] {
                             if j as usize != i
                                 && active(j as usize)
-                                && self_displacement(j as usize, i).norm_squared() < cutoff2
+                                && image
+                                    .displacement(positions, i, j as usize)
+                                    .norm_squared()
+                                    < cutoff2
                             {
                                 list.push(j);
                             }
@@ -306,8 +399,17 @@ impl Neighbours {
                 (counts, list)
             })
             .collect();
-        Self::from_chunks(cutoff_m, period_x_m, chunks)
+        Neighbours::from_chunks(cutoff_m, period_x_m, chunks)
     }
+}
+
+/// Which pairs of a particle's list [`Neighbours::within_two_by`] keeps.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Cut {
+    Never,
+    Always,
+    /// Only when a fluid particle is within the outer radius.
+    IfFluidWithin,
 }
 
 /// The smallest t with sqrt(t) >= radius_m: for d2 >= 0, sqrt(d2) < radius_m exactly when
@@ -348,9 +450,11 @@ impl KernelPairs {
         Self { near, lap }
     }
 
-    /// Pairs at the fluid particles and at the wall particles within the Laplacian radius of
+    /// Pairs at the fluid particles and at the other particles within the Laplacian radius of
     /// some fluid particle (at these positions, so independent of when `lists` were built);
-    /// other particles get none.
+    /// other particles get none. One pass: a wall particle's own list holds every fluid
+    /// particle whose list holds it (lists are symmetric among their centres, and a wall
+    /// near no fluid at the last build has no list and no fluid within reach now).
     pub fn near_fluid<const D: usize>(
         lists: &Neighbours,
         positions: &[Vector<D>],
@@ -359,15 +463,20 @@ impl KernelPairs {
         is_fluid: impl Fn(usize) -> bool + Sync,
     ) -> Self {
         let radius = radius_lap_m.max(radius_n_m);
-        let (fluid_lap, fluid_near) = lists.within_two(positions, radius, radius_n_m, &is_fluid);
-        let touched = fluid_lap.listed(positions.len());
-        let (wall_lap, wall_near) = lists.within_two(positions, radius, radius_n_m, |i| {
-            touched[i] && !is_fluid(i)
-        });
-        Self {
-            near: fluid_near.merged(&wall_near),
-            lap: fluid_lap.merged(&wall_lap),
-        }
+        let (lap, near) = lists.within_two_by(
+            positions,
+            radius,
+            radius_n_m,
+            |i| {
+                if is_fluid(i) {
+                    Cut::Always
+                } else {
+                    Cut::IfFluidWithin
+                }
+            },
+            &is_fluid,
+        );
+        Self { near, lap }
     }
 }
 

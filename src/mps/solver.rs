@@ -489,14 +489,13 @@ impl<const D: usize> Solver<D> {
         // the fluid only fill the support of others.
         let cutoff_m = self.config.radius_lap_m + skin;
         let active = |i: usize| kind[i].is_active();
-        let fluid = Neighbours::build_centres(&p.position_m, cutoff_m, active, |i| {
-            kind[i] == ParticleKind::Fluid
-        });
-        let touched = fluid.listed(p.len());
-        let walls = Neighbours::build_centres(&p.position_m, cutoff_m, active, |i| {
-            touched[i] && kind[i] == ParticleKind::Wall
-        });
-        self.neighbours = fluid.merged(&walls);
+        self.neighbours = Neighbours::build_centres_then_listed(
+            &p.position_m,
+            cutoff_m,
+            active,
+            |i| kind[i] == ParticleKind::Fluid,
+            |i| kind[i] == ParticleKind::Wall,
+        );
         self.listed_at_m = p.position_m.clone();
         self.timing.list_builds += 1;
     }
