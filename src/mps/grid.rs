@@ -105,7 +105,10 @@ impl Neighbours {
                 // the candidates fail, in no predictable pattern), then cut to length.
                 let capacity = self.offsets[range.end] - self.offsets[range.start];
                 let (mut outer, mut inner) = (vec![0u32; capacity], vec![0u32; capacity]);
-                let (mut counts_outer, mut counts_inner) = (Vec::new(), Vec::new());
+                let (mut counts_outer, mut counts_inner) = (
+                    Vec::with_capacity(range.len()),
+                    Vec::with_capacity(range.len()),
+                );
                 let (mut len_outer, mut len_inner) = (0, 0);
                 for i in range {
                     let before = (len_outer, len_inner);
