@@ -343,12 +343,13 @@ impl<const D: usize> Solver<D> {
         self.strain_invariant = stage.strain_invariant;
         {
             let p = &mut self.particles;
-            for i in 0..p.len() {
-                if p.kind[i] == ParticleKind::Fluid {
-                    p.velocity_m_s[i] = stage.velocity_m_s[i];
-                    p.position_m[i] += p.velocity_m_s[i] * dt_s;
+            let kind = &p.kind;
+            per_particle(&mut p.velocity_m_s, &mut p.position_m, |i, v, x| {
+                if kind[i] == ParticleKind::Fluid {
+                    *v = stage.velocity_m_s[i];
+                    *x += *v * dt_s;
                 }
-            }
+            });
             // Bodies move by the change of their path offset over the step, so they stay at
             // their initial position plus the offset (up to round-off) without any state.
             for body in &self.config.bodies {
@@ -369,11 +370,18 @@ impl<const D: usize> Solver<D> {
         let pressure_started = Instant::now();
         let number_density = self.number_density();
         let threshold = self.config.surface_threshold * self.refs.n0;
-        let surface: Vec<bool> = number_density.iter().map(|&n| n < threshold).collect();
+        let surface: Vec<bool> = number_density
+            .par_iter()
+            .with_min_len(PARTICLES_PER_TASK)
+            .map(|&n| n < threshold)
+            .collect();
         let source =
             self.pressure_source(dt_s, start_density.as_deref().unwrap_or(&number_density));
-        let surface_count = (0..self.particles.len())
-            .filter(|&i| self.particles.kind[i] == ParticleKind::Fluid && surface[i])
+        let kind = &self.particles.kind;
+        let surface_count = (0..kind.len())
+            .into_par_iter()
+            .with_min_len(PARTICLES_PER_TASK)
+            .filter(|&i| kind[i] == ParticleKind::Fluid && surface[i])
             .count();
         let (ppe, solve_s) = self.solve_pressure(dt_s, &source, &surface);
         self.timing.pressure_solve_s += solve_s;
@@ -424,15 +432,13 @@ impl<const D: usize> Solver<D> {
     fn non_flowing_fraction(&self, strain_invariant: &[f64]) -> f64 {
         let p = &self.particles;
         let rheology = self.config.rheology;
-        let (mut fluid, mut resting) = (0usize, 0usize);
-        for i in 0..p.len() {
-            if p.kind[i] == ParticleKind::Fluid {
-                fluid += 1;
-                if !rheology.is_flowing(strain_invariant[i]) {
-                    resting += 1;
-                }
-            }
-        }
+        // Whole-number counts: exact in any order.
+        let (fluid, resting) = (0..p.len())
+            .into_par_iter()
+            .with_min_len(PARTICLES_PER_TASK)
+            .filter(|&i| p.kind[i] == ParticleKind::Fluid)
+            .map(|i| (1usize, usize::from(!rheology.is_flowing(strain_invariant[i]))))
+            .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
         if fluid == 0 {
             0.0
         } else {
@@ -548,10 +554,10 @@ impl<const D: usize> Solver<D> {
             })
             .collect();
         let p = &mut self.particles;
-        for i in 0..p.len() {
-            p.velocity_m_s[i] += dv[i];
-            p.position_m[i] += dv[i] * dt_s;
-        }
+        per_particle(&mut p.velocity_m_s, &mut p.position_m, |i, v, x| {
+            *v += dv[i];
+            *x += dv[i] * dt_s;
+        });
     }
 
     /// n_i with radius re_n at the current positions, over all active particles (dummies
@@ -728,10 +734,10 @@ impl<const D: usize> Solver<D> {
             })
             .collect();
         let p = &mut self.particles;
-        for i in 0..p.len() {
-            p.velocity_m_s[i] += dv[i];
-            p.position_m[i] += dv[i] * dt_s;
-        }
+        per_particle(&mut p.velocity_m_s, &mut p.position_m, |i, v, x| {
+            *v += dv[i];
+            *x += dv[i] * dt_s;
+        });
     }
 
     /// Inlets, in order: the next layer of each unfinished inlet whose due time has come is
@@ -782,11 +788,22 @@ impl<const D: usize> Solver<D> {
     /// box becomes a ghost, at rest where it left.
     fn check_state(&mut self) -> Result<(), StepError> {
         let c = &self.config;
+        // Only fluid particles that fail a guard or left the box need a look, in index order
+        // (found in parallel: most steps there are none).
+        let p = &self.particles;
+        let flagged: Vec<usize> = (0..p.len())
+            .into_par_iter()
+            .with_min_len(PARTICLES_PER_TASK)
+            .filter(|&i| {
+                let (x, v) = (p.position_m[i], p.velocity_m_s[i]);
+                p.kind[i] == ParticleKind::Fluid
+                    && (!x.iter().chain(v.iter()).all(|a| a.is_finite())
+                        || v.norm() > c.max_speed_m_s
+                        || (0..D).any(|a| x[a] < c.domain_min_m[a] || x[a] > c.domain_max_m[a]))
+            })
+            .collect();
         let p = &mut self.particles;
-        for i in 0..p.len() {
-            if p.kind[i] != ParticleKind::Fluid {
-                continue;
-            }
+        for i in flagged {
             let (x, v) = (p.position_m[i], p.velocity_m_s[i]);
             if !x.iter().chain(v.iter()).all(|a| a.is_finite()) {
                 return Err(StepError::NonFinite {
@@ -825,4 +842,19 @@ impl<const D: usize> Solver<D> {
         }
         Ok(())
     }
+}
+
+/// f(i, velocity_i, position_i) for every particle, in parallel: each particle on its own, so
+/// the result does not depend on the split.
+fn per_particle<const D: usize>(
+    velocity: &mut [Vector<D>],
+    position: &mut [Vector<D>],
+    f: impl Fn(usize, &mut Vector<D>, &mut Vector<D>) + Sync,
+) {
+    velocity
+        .par_iter_mut()
+        .zip(position.par_iter_mut())
+        .enumerate()
+        .with_min_len(PARTICLES_PER_TASK)
+        .for_each(|(i, (v, x))| f(i, v, x));
 }

@@ -98,8 +98,14 @@ pub fn predict_velocity<const D: usize>(
         })
         .collect();
     let rheology = settings.rheology;
-    let mu: Vec<f64> = strain.iter().map(|&s| rheology.viscosity_pa_s(s)).collect();
+    let mu: Vec<f64> = strain
+        .par_iter()
+        .with_min_len(PARTICLES_PER_TASK)
+        .map(|&s| rheology.viscosity_pa_s(s))
+        .collect();
     let rhs: Vec<Vector<D>> = (0..n)
+        .into_par_iter()
+        .with_min_len(PARTICLES_PER_TASK)
         .map(|i| {
             if is_fluid(i) {
                 p.velocity_m_s[i] + body_force_m_s2 * dt_s
