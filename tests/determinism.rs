@@ -92,25 +92,43 @@ fn a_change_of_meaning_changes_the_state_hashes() {
     assert_ne!(a.last(), b.last());
 }
 
-#[test]
-fn reused_neighbour_lists_change_no_bit() {
-    // Verlet lists (rebuilt only after half a skin of motion) against fresh lists at every
-    // stage: the lists are in index order and far pairs are skipped, so the bits must agree.
+/// The state hash after `end_s` of `experiment` in D dimensions, with lists reused (Verlet
+/// lists, one-pass kernel-pair cut, collisions on the last cut's pairs) or fresh at every
+/// stage (collisions on the Verlet lists).
+fn state_after<const D: usize>(experiment: &str, sets: &[&str], end_s: f64, fresh: bool) -> String {
     use mps_runner::checkpoint::to_message;
     use mps_runner::experiment::build_scene;
     use mps_runner::mps::Solver;
     use mps_runner::run::solver_config;
-    let resolved = common::resolve("smoke_2d.yaml", &[]);
+    let resolved = common::resolve(experiment, sets);
     let m = &resolved.manifest;
-    let run = |fresh: bool| {
-        let scene = build_scene::<2>(m);
-        let mut solver = Solver::new(solver_config(m, &scene), scene.particles);
-        solver.fresh_lists = fresh;
-        while solver.time_s < 0.2 {
-            let dt = solver.next_dt_s(0.2);
-            solver.step(dt).unwrap();
-        }
-        to_message(0, &solver, 0.0).state_sha256
-    };
-    assert_eq!(run(false), run(true));
+    let scene = build_scene::<D>(m);
+    let mut solver = Solver::new(solver_config(m, &scene), scene.particles);
+    solver.fresh_lists = fresh;
+    while solver.time_s < end_s {
+        let dt = solver.next_dt_s(end_s);
+        solver.step(dt).unwrap();
+    }
+    to_message(0, &solver, 0.0).state_sha256
+}
+
+#[test]
+fn reused_neighbour_lists_change_no_bit() {
+    // Lists reused against fresh lists at every stage: the lists are in index order and far
+    // pairs are skipped, so the bits must agree. 2D, then 3D with walls, a moving cone and
+    // (L-B box) an inlet, spheres and fluid spreading along walls.
+    assert_eq!(
+        state_after::<2>("smoke_2d.yaml", &[], 0.2, false),
+        state_after::<2>("smoke_2d.yaml", &[], 0.2, true)
+    );
+    let slump = ["spacing_m=0.024"];
+    assert_eq!(
+        state_after::<3>("slump_3d.yaml", &slump, 0.3, false),
+        state_after::<3>("slump_3d.yaml", &slump, 0.3, true)
+    );
+    let lb_box = ["spacing_m=0.02"];
+    assert_eq!(
+        state_after::<3>("lb_box_3d.yaml", &lb_box, 0.6, false),
+        state_after::<3>("lb_box_3d.yaml", &lb_box, 0.6, true)
+    );
 }

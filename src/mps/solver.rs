@@ -195,6 +195,8 @@ pub struct Solver<const D: usize> {
     neighbours: Neighbours,
     /// Pairs of `neighbours` within the kernel radii at the current positions.
     pairs: KernelPairs,
+    /// Positions when `pairs` were cut.
+    paired_at_m: Vec<Vector<D>>,
     /// Positions when the neighbour lists were built (Verlet lists with a skin).
     listed_at_m: Vec<Vector<D>>,
     /// Rebuild the lists at every stage (slower; for checking that reuse changes no bit).
@@ -229,6 +231,7 @@ impl<const D: usize> Solver<D> {
             strain_invariant: Vec::new(),
             neighbours: Neighbours::default(),
             pairs: KernelPairs::default(),
+            paired_at_m: Vec::new(),
             listed_at_m: Vec::new(),
             fresh_lists: false,
             timing: StageTimes::default(),
@@ -472,6 +475,7 @@ impl<const D: usize> Solver<D> {
             r.radius_lap_m,
             |i| kind[i] == ParticleKind::Fluid,
         );
+        self.paired_at_m.clone_from(&self.particles.position_m);
         self.timing.kernel_pairs_s += started.elapsed().as_secs_f64();
     }
 
@@ -506,6 +510,33 @@ impl<const D: usize> Solver<D> {
         self.timing.list_builds += 1;
     }
 
+    /// Lists holding every pair closer than the collision distances: the number-density pairs
+    /// of the last cut when no particle has moved far enough since to close a pair from
+    /// beyond their radius (a pair closer than d now was closer than d + 2 max|moved| then),
+    /// else the Verlet lists. Both are in ascending index order, and collisions skip pairs
+    /// beyond d, so either gives the same bits; the pairs are about a fifth as many in 3D.
+    fn collision_candidates(&self) -> &Neighbours {
+        let c = &self.config;
+        let p = &self.particles;
+        let reach = c.collision_distance_m.max(c.wall_collision_distance_m);
+        if self.paired_at_m.len() != p.len() || self.fresh_lists {
+            return &self.neighbours;
+        }
+        let moved = max_by(p.len(), |i| {
+            if p.kind[i].is_active() {
+                (p.position_m[i] - self.paired_at_m[i]).norm()
+            } else {
+                0.0
+            }
+        });
+        // A relative margin for the rounding of the distances.
+        if reach + 2.0 * moved < self.refs.radius_n_m * (1.0 - 1e-9) {
+            &self.pairs.near
+        } else {
+            &self.neighbours
+        }
+    }
+
     /// (5) Collision model: fluid pairs closer than the collision distance that approach each
     /// other exchange momentum along their line of centres with restitution e (equal masses;
     /// walls are immovable). Jacobi-style: all impulses from the pre-collision velocities.
@@ -516,7 +547,7 @@ impl<const D: usize> Solver<D> {
             return;
         }
         let p = &self.particles;
-        let nb = &self.neighbours;
+        let nb = self.collision_candidates();
         let d2 = c.collision_distance_m * c.collision_distance_m;
         let d2_wall = c.wall_collision_distance_m * c.wall_collision_distance_m;
         let e = c.collision_restitution;
