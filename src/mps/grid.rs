@@ -255,7 +255,10 @@ struct CellGrid<const D: usize> {
 
 impl<const D: usize> CellGrid<D> {
     fn new(positions: &[Vector<D>], cutoff_m: f64, period_x_m: Option<f64>) -> Self {
-        let mut lo = positions.first().copied().unwrap_or_else(Vector::<D>::zeros);
+        let mut lo = positions
+            .first()
+            .copied()
+            .unwrap_or_else(Vector::<D>::zeros);
         let mut hi = lo;
         for p in positions {
             lo = lo.inf(p);
@@ -385,9 +388,7 @@ impl<const D: usize> CellGrid<D> {
                         for &j in &sorted[start[f]..start[f + 1]] {
                             if j as usize != i
                                 && active(j as usize)
-                                && image
-                                    .displacement(positions, i, j as usize)
-                                    .norm_squared()
+                                && image.displacement(positions, i, j as usize).norm_squared()
                                     < cutoff2
                             {
                                 list.push(j);

@@ -440,7 +440,12 @@ impl<const D: usize> Solver<D> {
             .into_par_iter()
             .with_min_len(PARTICLES_PER_TASK)
             .filter(|&i| p.kind[i] == ParticleKind::Fluid)
-            .map(|i| (1usize, usize::from(!rheology.is_flowing(strain_invariant[i]))))
+            .map(|i| {
+                (
+                    1usize,
+                    usize::from(!rheology.is_flowing(strain_invariant[i])),
+                )
+            })
             .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
         if fluid == 0 {
             0.0

@@ -198,16 +198,9 @@ fn bench_case(case: &Case, runner: &Runner, args: &SuiteArgs, label: &str) -> (C
     let command = command_text(&runner.shown, &argv);
     eprintln!("bench suite: {label}: {command}");
     let mut row = empty_row(&case.name, &command);
-    let measured = match child::run(&runner.path, &argv) {
-        Ok(m) => m,
-        Err(e) => {
-            row.outcome = format!("cannot start: {e}");
-            eprintln!("  {}", row.outcome);
-            return (row, false);
-        }
+    let Some(measured) = started(child::run(&runner.path, &argv), &mut row) else {
+        return (row, false);
     };
-    row.time_to_result_s = format!("{:.2}", measured.wall_s);
-    row.peak_mib = table::mib(measured.peak_kib);
     if let Some(r) = child::parse_bench(&measured.stdout) {
         row.particles = r.particles.to_string();
         row.steps = r.steps.to_string();
@@ -217,6 +210,23 @@ fn bench_case(case: &Case, runner: &Runner, args: &SuiteArgs, label: &str) -> (C
         row.outcome = r.outcome;
     }
     finish_row(row, &measured)
+}
+
+/// The measured child with its time to result and peak memory in the row, or None with the
+/// reason it could not start in the outcome cell.
+fn started(run: std::io::Result<Measured>, row: &mut CaseRow) -> Option<Measured> {
+    match run {
+        Ok(m) => {
+            row.time_to_result_s = format!("{:.2}", m.wall_s);
+            row.peak_mib = table::mib(m.peak_kib);
+            Some(m)
+        }
+        Err(e) => {
+            row.outcome = format!("cannot start: {e}");
+            eprintln!("  {}", row.outcome);
+            None
+        }
+    }
 }
 
 /// The outcome cell with the exit status when the run did not succeed, and the progress line.
@@ -257,17 +267,11 @@ fn sweep_case(
     let command = command_text(&runner.shown, &argv);
     eprintln!("bench suite: {label} (a sweep of {points} points): {command}");
     let mut row = empty_row(&format!("{} ({points} points)", case.name), &command);
-    let measured = match tmp.create().and_then(|()| child::run(&runner.path, &argv)) {
-        Ok(m) => m,
-        Err(e) => {
-            row.outcome = format!("cannot start: {e}");
-            eprintln!("  {}", row.outcome);
-            return (row, false);
-        }
+    let run = tmp.create().and_then(|()| child::run(&runner.path, &argv));
+    let Some(measured) = started(run, &mut row) else {
+        return (row, false);
     };
-    row.time_to_result_s = format!("{:.2}", measured.wall_s);
     row.wall_s = row.time_to_result_s.clone();
-    row.peak_mib = table::mib(measured.peak_kib);
     match sweep_totals(&tmp.0) {
         Ok(t) => fill_sweep_row(&mut row, &t, points, measured.wall_s),
         Err(why) => eprintln!("  no run files to read: {why}"),
