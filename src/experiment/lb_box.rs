@@ -59,8 +59,9 @@ pub struct LbBox {
 
 impl Default for LbBox {
     fn default() -> Self {
-        // Four spheres on the floor in a row along the middle of the horizontal part, 50 mm
-        // apart, the first 50 mm past the vertical part.
+        // Four spheres on the floor in a row along the middle of the horizontal part, 200 mm
+        // apart, the first 50 mm past the vertical part: the rock zone (x 0.25-1.45 m) spans
+        // the concrete's reach down to 20 Pa, so concrete that gets further stays among them.
         let sphere = |x: f64| vec![x, 0.1, 0.075];
         Self {
             vertical_width_m: 0.2,
@@ -74,7 +75,7 @@ impl Default for LbBox {
             inlet_speed_m_s: 1.0,
             pour_volume_m3: 0.013,
             sphere_diameter_m: 0.15,
-            sphere_centres_m: vec![sphere(0.325), sphere(0.525), sphere(0.725), sphere(0.925)],
+            sphere_centres_m: vec![sphere(0.325), sphere(0.675), sphere(1.025), sphere(1.375)],
             filling_height_m: 0.15,
         }
     }
@@ -662,8 +663,8 @@ mod tests {
         let b = LbBox::default();
         let r = 0.075_f64;
         let sphere = 4.0 / 3.0 * std::f64::consts::PI * r * r * r;
-        // Spheres on the floor up to their tops: zone 0.75 x 0.2 x 0.15 m less 4 spheres.
-        let expected = 0.75 * 0.2 * 0.15 - 4.0 * sphere;
+        // Spheres on the floor up to their tops: zone 1.2 x 0.2 x 0.15 m less 4 spheres.
+        let expected = 1.2 * 0.2 * 0.15 - 4.0 * sphere;
         assert!((b.void_volume_m3(0.01) - expected).abs() < 1e-12);
     }
 }
