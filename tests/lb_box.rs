@@ -197,3 +197,39 @@ fn l_box_surface_approaches_the_closed_form() {
         );
     }
 }
+
+/// `runner profile RUN RUN`: runs of one test at two spacings share one figure (each run's
+/// surface and the closed form for the first run's volume) and the table holds each run's
+/// own; a run of another test (the slump) is refused, naming it.
+#[test]
+fn profiles_of_two_spacings_share_one_figure() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = |sets: &[&str]| {
+        let resolved = common::resolve("l_box_3d.yaml", sets);
+        common::run_completed(&resolved, dir.path(), 2).path
+    };
+    let coarse = run(&[
+        "spacing_m=0.03",
+        "scene.inlet_diameter_m=0.09",
+        "time.end_s=1",
+    ]);
+    let fine = run(&["spacing_m=0.025", "time.end_s=1"]);
+    let svg = dir.path().join("both.svg");
+    let (path, table) =
+        mps_runner::report::profiles(&[coarse.clone(), fine.clone()], Some(&svg)).unwrap();
+    assert_eq!(path, svg);
+    let text = std::fs::read_to_string(&svg).unwrap();
+    for needle in ["l0 = 30 mm", "l0 = 25 mm", "closed form for the volume"] {
+        assert!(text.contains(needle), "{needle} not in the figure");
+    }
+    // One table per run, each with its own spacing and its rows.
+    assert_eq!(table.matches("x_m       d_m").count(), 2, "{table}");
+    assert!(table.contains("spacing 0.03 m") && table.contains("spacing 0.025 m"));
+    let slump = common::resolve("slump_3d.yaml", &["spacing_m=0.04", "time.end_s=0.01"]);
+    let slump = common::run_in(&slump, dir.path(), 2).path;
+    let refused = mps_runner::report::profiles(&[coarse, slump], Some(&svg)).unwrap_err();
+    assert!(
+        refused.to_string().contains("slump") && refused.to_string().contains("not the same test"),
+        "{refused}"
+    );
+}

@@ -556,21 +556,86 @@ pub fn lb_profile(run: &RunFile) -> Result<crate::experiment::lb_box::LbProfile>
 /// `runner profile`: the surface at rest of a slump-flow or an L-B box run against its
 /// closed form, as a table (returned) and an SVG plot (default `<run>-profile.svg`).
 pub fn profile(mcap: &Path, out: Option<&Path>) -> Result<(PathBuf, String)> {
-    let run = read(mcap)?;
     let out = out.map_or_else(|| beside(mcap, "-profile.svg"), Path::to_path_buf);
-    match canonical_manifest(&run)
+    let fig = profile_figure(&read(mcap)?)?;
+    plot::line_plot(&out, &fig.title, fig.x_label, "h [m]", &fig.series, false)?;
+    Ok((out, fig.table))
+}
+
+/// `runner profile RUN RUN...`: several runs of one test (e.g. one experiment at several
+/// spacings) in one figure: each run's surface, and the closed form for the first run's
+/// volume; the table is each run's table in turn. Default figure: `<first run>-profiles.svg`.
+pub fn profiles(mcaps: &[PathBuf], out: Option<&Path>) -> Result<(PathBuf, String)> {
+    let [first, ..] = mcaps else {
+        return Err(ReportError::Input("no run file given".into()));
+    };
+    let out = out.map_or_else(|| beside(first, "-profiles.svg"), Path::to_path_buf);
+    let figs = mcaps
+        .iter()
+        .map(|f| read(f).and_then(|run| profile_figure(&run).map(|fig| (fig, run))))
+        .collect::<Result<Vec<_>>>()?;
+    let x_label = figs[0].0.x_label;
+    if let Some((_, run)) = figs.iter().find(|(f, _)| f.x_label != x_label) {
+        return Err(ReportError::Input(format!(
+            "{} is not the same test as {}: one figure takes runs of one kind (slump or L-B box)",
+            run_title(run),
+            run_title(&figs[0].1)
+        )));
+    }
+    let mut series: Vec<Series> = figs
+        .iter()
+        .map(|(f, run)| Series {
+            label: format!(
+                "{}: MPS, l0 = {} mm, t = {:.1} s",
+                run_title(run),
+                1000.0 * f.spacing_m,
+                f.time_s
+            ),
+            points: f.series[0].points.clone(),
+        })
+        .collect();
+    if let Some(closed) = figs[0].0.series.get(2) {
+        series.push(Series {
+            label: format!("{} (volume of the first run)", closed.label),
+            points: closed.points.clone(),
+        });
+    }
+    let title = format!("{} runs: surface against the closed form", figs.len());
+    plot::line_plot(&out, &title, x_label, "h [m]", &series, false)?;
+    let table = figs
+        .iter()
+        .map(|(f, _)| f.table.as_str())
+        .collect::<Vec<_>>()
+        .join("\n");
+    Ok((out, table))
+}
+
+/// One run's profile: its table, and the series of its figure (the MPS surface, the closed
+/// form for the measured front or radius, and where there is one the closed form for the
+/// volume).
+struct ProfileFigure {
+    table: String,
+    title: String,
+    x_label: &'static str,
+    spacing_m: f64,
+    time_s: f64,
+    series: Vec<Series>,
+}
+
+fn profile_figure(run: &RunFile) -> Result<ProfileFigure> {
+    match canonical_manifest(run)
         .as_ref()
         .and_then(|v| v.get("scene"))
         .and_then(|v| v.get("kind"))
         .and_then(|v| v.as_str())
     {
-        Some("lb_box") => lb_box_profile(&run, out),
-        _ => slump_profile_plot(&run, out),
+        Some("lb_box") => lb_box_profile(run),
+        _ => slump_profile_figure(run),
     }
 }
 
 /// The L-B box surface h(x) along the box against the L-box closed form (no spheres).
-fn lb_box_profile(run: &RunFile, out: PathBuf) -> Result<(PathBuf, String)> {
+fn lb_box_profile(run: &RunFile) -> Result<ProfileFigure> {
     use crate::experiment::lb_box::closed_form_height_m;
     let p = lb_profile(run)?;
     let closed = p.closed_form_front_m.is_finite();
@@ -625,21 +690,19 @@ fn lb_box_profile(run: &RunFile, out: PathBuf) -> Result<(PathBuf, String)> {
             points: fine(p.closed_form_front_m),
         });
     }
-    let title = format!("{}: surface at t = {:.2} s", run_title(run), p.time_s);
-    plot::line_plot(
-        &out,
-        &title,
-        "x from the back wall [m]",
-        "h [m]",
-        &series,
-        false,
-    )?;
-    Ok((out, table))
+    Ok(ProfileFigure {
+        table,
+        title: format!("{}: surface at t = {:.2} s", run_title(run), p.time_s),
+        x_label: "x from the back wall [m]",
+        spacing_m: p.spacing_m,
+        time_s: p.time_s,
+        series,
+    })
 }
 
-/// The slump profile as a table (returned) and an SVG plot with the closed form for the
+/// The slump profile as a table and the series of a plot with the closed form for the
 /// measured radius and for the closed-form radius.
-fn slump_profile_plot(run: &RunFile, out: PathBuf) -> Result<(PathBuf, String)> {
+fn slump_profile_figure(run: &RunFile) -> Result<ProfileFigure> {
     use crate::experiment::slump::closed_form_height_m;
     let p = slump_profile(run)?;
     let (rho, g, tau) = (p.density_kg_m3, p.gravity_m_s2, p.yield_stress_pa);
@@ -669,7 +732,7 @@ fn slump_profile_plot(run: &RunFile, out: PathBuf) -> Result<(PathBuf, String)> 
             .map(|r| (r, closed_form_height_m(rho, g, tau, radius, r)))
             .collect()
     };
-    let series = [
+    let series = vec![
         Series {
             label: "MPS surface (top particle + l0/2)".into(),
             points: p.points.iter().map(|q| (q.r_m, q.measured_m)).collect(),
@@ -683,9 +746,14 @@ fn slump_profile_plot(run: &RunFile, out: PathBuf) -> Result<(PathBuf, String)> 
             points: fine(p.closed_form_radius_m),
         },
     ];
-    let title = format!("{}: surface at t = {:.2} s", run_title(run), p.time_s);
-    plot::line_plot(&out, &title, "r [m]", "h [m]", &series, false)?;
-    Ok((out, table))
+    Ok(ProfileFigure {
+        table,
+        title: format!("{}: surface at t = {:.2} s", run_title(run), p.time_s),
+        x_label: "r [m]",
+        spacing_m: p.spacing_m,
+        time_s: p.time_s,
+        series,
+    })
 }
 
 /// `runner draw`: the particle set at t = 0 of a manifest (walls, dummies, fluid, and each

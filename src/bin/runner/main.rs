@@ -280,10 +280,13 @@ enum Command {
     },
     /// Slump-flow and L-B box runs: the free surface of the last checkpoint against its closed
     /// form (slump: h(r), Roussel & Coussot 2005; L-box, no spheres: h(x), Nguyen, Roussel &
-    /// Coussot 2006), printed as a table and drawn (SVG).
+    /// Coussot 2006), printed as a table and drawn (SVG). Several runs of one test (e.g. one
+    /// experiment at several spacings) go into one figure.
     Profile {
-        run: PathBuf,
-        /// Output file (default: <run>-profile.svg beside the run).
+        #[arg(required = true)]
+        runs: Vec<PathBuf>,
+        /// Output file (default: <run>-profile.svg beside the run; with several runs
+        /// <first run>-profiles.svg).
         #[arg(long)]
         out: Option<PathBuf>,
     },
@@ -458,11 +461,15 @@ fn main() -> ExitCode {
                 out.as_deref(),
             ))
         }
-        Some(Command::Profile { run, out }) => {
-            if let Err(code) = readable_run(&run) {
+        Some(Command::Profile { runs, out }) => {
+            if let Some(code) = runs.iter().find_map(|run| readable_run(run).err()) {
                 return code;
             }
-            report_result(report::profile(&run, out.as_deref()).map(|(path, table)| {
+            let drawn = match runs.as_slice() {
+                [run] => report::profile(run, out.as_deref()),
+                _ => report::profiles(&runs, out.as_deref()),
+            };
+            report_result(drawn.map(|(path, table)| {
                 print!("{table}");
                 path
             }))
