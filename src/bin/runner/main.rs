@@ -1497,6 +1497,19 @@ fn print_point(o: &mps_runner::sweep_run::PointOutcome, total: usize, quiet: boo
             if !r.stop_reason.is_empty() && !quiet {
                 eprintln!("[{}/{total}] stopped: {}", o.index + 1, r.stop_reason);
             }
+            // The file holds no wall time (nothing in it depends on the machine's speed).
+            if o.start != PointStart::Existing && !quiet {
+                eprintln!(
+                    "[{}/{total}] wall time {:.1} s{}",
+                    o.index + 1,
+                    r.wall_time_s,
+                    if o.start == PointStart::Resumed {
+                        " (this session)"
+                    } else {
+                        ""
+                    }
+                );
+            }
         }
         Err(e) => println!("[{}/{total}] {} error {e}", o.index + 1, o.label),
     }
