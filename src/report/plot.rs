@@ -317,13 +317,16 @@ pub fn snapshot_plot(
                 .map_err(|x| e(&x))?;
         }
     }
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .position(SeriesLabelPosition::UpperRight)
-        .draw()
-        .map_err(|x| e(&x))?;
+    // A ramp of fluid only (the view from above) has no labelled series: no empty legend box.
+    if !walls.is_empty() || matches!(coloring, Coloring::Categorical(_)) {
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .position(SeriesLabelPosition::UpperRight)
+            .draw()
+            .map_err(|x| e(&x))?;
+    }
     full.present().map_err(|x| e(&x))?;
     Ok(())
 }
