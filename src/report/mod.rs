@@ -557,8 +557,14 @@ pub fn lb_profile(run: &RunFile) -> Result<crate::experiment::lb_box::LbProfile>
 /// closed form, as a table (returned) and an SVG plot (default `<run>-profile.svg`).
 pub fn profile(mcap: &Path, out: Option<&Path>) -> Result<(PathBuf, String)> {
     let out = out.map_or_else(|| beside(mcap, "-profile.svg"), Path::to_path_buf);
-    let fig = profile_figure(&read(mcap)?)?;
-    plot::line_plot(&out, &fig.title, fig.x_label, "h [m]", &fig.series, false)?;
+    let run = read(mcap)?;
+    let fig = profile_figure(&run)?;
+    let title = format!("{}: surface at t = {:.2} s", run_title(&run), fig.time_s);
+    let series: Vec<Series> = std::iter::once(fig.surface)
+        .chain(fig.closed_at_measured)
+        .chain(fig.closed_for_volume)
+        .collect();
+    plot::line_plot(&out, &title, fig.x_label, "h [m]", &series, false)?;
     Ok((out, fig.table))
 }
 
@@ -591,10 +597,10 @@ pub fn profiles(mcaps: &[PathBuf], out: Option<&Path>) -> Result<(PathBuf, Strin
                 1000.0 * f.spacing_m,
                 f.time_s
             ),
-            points: f.series[0].points.clone(),
+            points: f.surface.points.clone(),
         })
         .collect();
-    if let Some(closed) = figs[0].0.series.get(2) {
+    if let Some(closed) = &figs[0].0.closed_for_volume {
         series.push(Series {
             label: format!("{} (volume of the first run)", closed.label),
             points: closed.points.clone(),
@@ -610,16 +616,18 @@ pub fn profiles(mcaps: &[PathBuf], out: Option<&Path>) -> Result<(PathBuf, Strin
     Ok((out, table))
 }
 
-/// One run's profile: its table, and the series of its figure (the MPS surface, the closed
-/// form for the measured front or radius, and where there is one the closed form for the
-/// volume).
+/// One run's profile: its table, and the series of its figure.
 struct ProfileFigure {
     table: String,
-    title: String,
     x_label: &'static str,
     spacing_m: f64,
     time_s: f64,
-    series: Vec<Series>,
+    /// The MPS surface.
+    surface: Series,
+    /// The closed form for the measured front or radius (none without one, e.g. spheres).
+    closed_at_measured: Option<Series>,
+    /// The closed form for the run's volume: its own front or radius.
+    closed_for_volume: Option<Series>,
 }
 
 fn profile_figure(run: &RunFile) -> Result<ProfileFigure> {
@@ -667,36 +675,32 @@ fn lb_box_profile(run: &RunFile) -> Result<ProfileFigure> {
             q.measured_m - q.closed_form_m
         );
     }
-    let mut series = vec![Series {
-        label: "MPS surface (top particle + l0/2)".into(),
-        points: p.points.iter().map(|q| (q.x_m, q.measured_m)).collect(),
-    }];
-    if closed {
-        let fine = |front: f64| -> Vec<(f64, f64)> {
-            (0..=400)
-                .map(|k| front * f64::from(k) / 400.0)
-                .map(|x| (x, closed_form_height_m(p.k_m, p.width_m, front - x)))
-                .collect()
-        };
-        series.push(Series {
+    let fine = |front: f64| -> Vec<(f64, f64)> {
+        (0..=400)
+            .map(|k| front * f64::from(k) / 400.0)
+            .map(|x| (x, closed_form_height_m(p.k_m, p.width_m, front - x)))
+            .collect()
+    };
+    Ok(ProfileFigure {
+        table,
+        x_label: "x from the back wall [m]",
+        spacing_m: p.spacing_m,
+        time_s: p.time_s,
+        surface: Series {
+            label: "MPS surface (top particle + l0/2)".into(),
+            points: p.points.iter().map(|q| (q.x_m, q.measured_m)).collect(),
+        },
+        closed_at_measured: closed.then(|| Series {
             label: format!("L-box closed form, measured front x = {:.3} m", p.front_m),
             points: fine(p.front_m),
-        });
-        series.push(Series {
+        }),
+        closed_for_volume: closed.then(|| Series {
             label: format!(
                 "L-box closed form for the volume, front x = {:.3} m",
                 p.closed_form_front_m
             ),
             points: fine(p.closed_form_front_m),
-        });
-    }
-    Ok(ProfileFigure {
-        table,
-        title: format!("{}: surface at t = {:.2} s", run_title(run), p.time_s),
-        x_label: "x from the back wall [m]",
-        spacing_m: p.spacing_m,
-        time_s: p.time_s,
-        series,
+        }),
     })
 }
 
@@ -732,27 +736,23 @@ fn slump_profile_figure(run: &RunFile) -> Result<ProfileFigure> {
             .map(|r| (r, closed_form_height_m(rho, g, tau, radius, r)))
             .collect()
     };
-    let series = vec![
-        Series {
-            label: "MPS surface (top particle + l0/2)".into(),
-            points: p.points.iter().map(|q| (q.r_m, q.measured_m)).collect(),
-        },
-        Series {
-            label: format!("h(r), measured R = {:.3} m", p.radius_m),
-            points: fine(p.radius_m),
-        },
-        Series {
-            label: format!("h(r), closed-form R = {:.3} m", p.closed_form_radius_m),
-            points: fine(p.closed_form_radius_m),
-        },
-    ];
     Ok(ProfileFigure {
         table,
-        title: format!("{}: surface at t = {:.2} s", run_title(run), p.time_s),
         x_label: "r [m]",
         spacing_m: p.spacing_m,
         time_s: p.time_s,
-        series,
+        surface: Series {
+            label: "MPS surface (top particle + l0/2)".into(),
+            points: p.points.iter().map(|q| (q.r_m, q.measured_m)).collect(),
+        },
+        closed_at_measured: Some(Series {
+            label: format!("h(r), measured R = {:.3} m", p.radius_m),
+            points: fine(p.radius_m),
+        }),
+        closed_for_volume: Some(Series {
+            label: format!("h(r), closed-form R = {:.3} m", p.closed_form_radius_m),
+            points: fine(p.closed_form_radius_m),
+        }),
     })
 }
 

@@ -119,16 +119,22 @@ pub fn line_plot(
         }
     }
     if markers || series.len() > 1 {
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .position(SeriesLabelPosition::UpperRight)
-            .draw()
-            .map_err(|x| e(&x))?;
+        draw_legend(&mut chart).map_err(|x| e(&x))?;
     }
     root.present().map_err(|x| e(&x))?;
     Ok(())
+}
+
+/// The legend of the labelled series, top right on a translucent white box (every figure).
+fn draw_legend<'a, DB: DrawingBackend + 'a, CT: CoordTranslate>(
+    chart: &mut ChartContext<'a, DB, CT>,
+) -> std::result::Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .position(SeriesLabelPosition::UpperRight)
+        .draw()
 }
 
 /// How a field is coloured: categories (a few small integers) or a ramp over `[lo, hi]`.
@@ -319,13 +325,7 @@ pub fn snapshot_plot(
     }
     // A ramp of fluid only (the view from above) has no labelled series: no empty legend box.
     if !walls.is_empty() || matches!(coloring, Coloring::Categorical(_)) {
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .position(SeriesLabelPosition::UpperRight)
-            .draw()
-            .map_err(|x| e(&x))?;
+        draw_legend(&mut chart).map_err(|x| e(&x))?;
     }
     full.present().map_err(|x| e(&x))?;
     Ok(())
