@@ -404,3 +404,43 @@ fn info_of_a_cut_file_names_what_is_missing() {
     assert_eq!(code, Some(2));
     assert!(out.is_empty() && err.contains("MCAP"), "{err}");
 }
+
+/// `runner info RUN | head` and the like: a reader that has gone before the first line ends
+/// the print-only commands quietly (SIGPIPE, as other Unix tools), never with a panic. The
+/// pipe's read end is closed before the child starts, so the first write always fails.
+#[cfg(unix)]
+#[test]
+fn print_only_commands_end_quietly_when_the_reader_has_gone() {
+    use std::os::unix::process::ExitStatusExt;
+    let dir = tempfile::tempdir().unwrap();
+    let run = smoke(dir.path());
+    let run = run.to_str().unwrap();
+    for args in [
+        vec!["info", run],
+        vec!["export", "--csv", run],
+        vec![
+            "hash",
+            common::experiment("smoke_2d.yaml").to_str().unwrap(),
+        ],
+    ] {
+        let (reader, writer) = std::io::pipe().unwrap();
+        drop(reader);
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_runner"))
+            .args(&args)
+            .stdout(writer)
+            .stderr(std::process::Stdio::piped())
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            !stderr.contains("panicked"),
+            "runner {args:?} panicked: {stderr}"
+        );
+        assert_eq!(
+            out.status.signal(),
+            Some(libc::SIGPIPE),
+            "runner {args:?} ends by SIGPIPE: {:?}, stderr {stderr}",
+            out.status
+        );
+    }
+}

@@ -352,6 +352,19 @@ fn threads_arg(text: &str) -> Result<usize, String> {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    // A reader that stops early (`runner info RUN | head`) ends these print-only commands as
+    // it ends other Unix tools, by SIGPIPE, instead of a panic on the closed pipe. Commands
+    // that write run files keep Rust's default (EPIPE), so a closed stdout cannot cut a file.
+    #[cfg(unix)]
+    if matches!(
+        cli.command,
+        Some(Command::Info { .. } | Command::Export { .. } | Command::Hash { .. })
+    ) {
+        // SAFETY: restores the default disposition of one signal before any thread exists.
+        unsafe {
+            libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+        }
+    }
     match cli.command {
         Some(Command::Draw {
             manifest,
