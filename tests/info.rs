@@ -406,18 +406,19 @@ fn info_of_a_cut_file_names_what_is_missing() {
 }
 
 /// `runner info RUN | head` and the like: a reader that has gone before the first line ends
-/// the print-only commands quietly (SIGPIPE, as other Unix tools), never with a panic. The
-/// pipe's read end is closed before the child starts, so the first write always fails.
+/// the print-only commands quietly (SIGPIPE, as other Unix tools), and a run carries on to
+/// its whole file and exit code; never a panic. The pipe's read end is closed before the
+/// child starts, so the first write always fails.
 #[cfg(unix)]
 #[test]
-fn print_only_commands_end_quietly_when_the_reader_has_gone() {
+fn output_into_a_closed_pipe_never_panics() {
     use std::os::unix::process::ExitStatusExt;
     let dir = tempfile::tempdir().unwrap();
     let run = smoke(dir.path());
-    let run = run.to_str().unwrap();
+    let run_text = run.to_str().unwrap();
     for args in [
-        vec!["info", run],
-        vec!["export", "--csv", run],
+        vec!["info", run_text],
+        vec!["export", "--csv", run_text],
         vec![
             "hash",
             common::experiment("smoke_2d.yaml").to_str().unwrap(),
@@ -443,4 +444,31 @@ fn print_only_commands_end_quietly_when_the_reader_has_gone() {
             out.status
         );
     }
+    // A run prints its file's path last: the closed pipe is ignored, the run's exit code
+    // stands and the file is whole.
+    let out_dir = dir.path().join("piped");
+    let (reader, writer) = std::io::pipe().unwrap();
+    drop(reader);
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_runner"))
+        .arg(common::experiment("smoke_2d.yaml"))
+        .args(["--quiet", "--threads", "1", "--out"])
+        .arg(&out_dir)
+        .stdout(writer)
+        .stderr(std::process::Stdio::piped())
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "a run into a closed pipe: {stderr}"
+    );
+    let file = std::fs::read_dir(&out_dir)
+        .unwrap()
+        .next()
+        .unwrap()
+        .unwrap()
+        .path();
+    assert_eq!(file.extension().unwrap(), "mcap");
+    assert_eq!(std::fs::read(&file).unwrap(), std::fs::read(&run).unwrap());
 }

@@ -2,6 +2,35 @@
 //! that turns results into exit codes: 0 success, 1 internal or I/O error, 2 bad input (CLI,
 //! manifest, or a run file that is unreadable, incomplete or damaged), 3 simulation failed,
 //! 130 interrupted. `runner verify`: 0 identical, 1 not, 2 the file cannot be used.
+
+/// `print!` and `println!` for this binary: standard output whose reader has gone (`runner
+/// RUN | head -1`) is no error of ours, so a closed pipe is ignored rather than a panic (std's
+/// macros panic) and the command finishes its work and its exit code; any other failure to
+/// write still panics as std's would. Defined before the modules so they use it too.
+macro_rules! print {
+    ($($arg:tt)*) => {
+        $crate::write_stdout(::std::format_args!($($arg)*))
+    };
+}
+macro_rules! println {
+    () => {
+        print!("\n")
+    };
+    ($($arg:tt)*) => {
+        print!("{}\n", ::std::format_args!($($arg)*))
+    };
+}
+
+fn write_stdout(args: std::fmt::Arguments) {
+    use std::io::Write;
+    match std::io::stdout().lock().write_fmt(args) {
+        Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => {
+            panic!("failed printing to stdout: {e}")
+        }
+        _ => {}
+    }
+}
+
 mod bench_suite;
 mod progress;
 
