@@ -424,14 +424,7 @@ fn output_into_a_closed_pipe_never_panics() {
             common::experiment("smoke_2d.yaml").to_str().unwrap(),
         ],
     ] {
-        let (reader, writer) = std::io::pipe().unwrap();
-        drop(reader);
-        let out = std::process::Command::new(env!("CARGO_BIN_EXE_runner"))
-            .args(&args)
-            .stdout(writer)
-            .stderr(std::process::Stdio::piped())
-            .output()
-            .unwrap();
+        let out = runner_into_closed_pipe(&args);
         let stderr = String::from_utf8_lossy(&out.stderr);
         assert!(
             !stderr.contains("panicked"),
@@ -447,16 +440,15 @@ fn output_into_a_closed_pipe_never_panics() {
     // A run prints its file's path last: the closed pipe is ignored, the run's exit code
     // stands and the file is whole.
     let out_dir = dir.path().join("piped");
-    let (reader, writer) = std::io::pipe().unwrap();
-    drop(reader);
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_runner"))
-        .arg(common::experiment("smoke_2d.yaml"))
-        .args(["--quiet", "--threads", "1", "--out"])
-        .arg(&out_dir)
-        .stdout(writer)
-        .stderr(std::process::Stdio::piped())
-        .output()
-        .unwrap();
+    let manifest = common::experiment("smoke_2d.yaml");
+    let out = runner_into_closed_pipe(&[
+        manifest.to_str().unwrap(),
+        "--quiet",
+        "--threads",
+        "1",
+        "--out",
+        out_dir.to_str().unwrap(),
+    ]);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert_eq!(
         out.status.code(),
@@ -471,4 +463,17 @@ fn output_into_a_closed_pipe_never_panics() {
         .path();
     assert_eq!(file.extension().unwrap(), "mcap");
     assert_eq!(std::fs::read(&file).unwrap(), std::fs::read(&run).unwrap());
+}
+
+/// Runs the binary with `args`, its standard output a pipe whose read end is already closed.
+#[cfg(unix)]
+fn runner_into_closed_pipe(args: &[&str]) -> std::process::Output {
+    let (reader, writer) = std::io::pipe().unwrap();
+    drop(reader);
+    std::process::Command::new(env!("CARGO_BIN_EXE_runner"))
+        .args(args)
+        .stdout(writer)
+        .stderr(std::process::Stdio::piped())
+        .output()
+        .unwrap()
 }

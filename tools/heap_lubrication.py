@@ -49,11 +49,13 @@ def surface(pc, l0):
     f = {fl.name: fl.offset for fl in pc.fields}
     n = len(pc.data) // pc.point_stride
     tops = {}
+    count = 0
     for i in range(n):
         base = i * pc.point_stride
         kind = struct.unpack_from("<f", pc.data, base + f["kind"])[0]
         if kind != FLUID_KIND:
             continue
+        count += 1
         x = struct.unpack_from("<f", pc.data, base + f["x"])[0]
         y = struct.unpack_from("<f", pc.data, base + f["y"])[0]
         j = int(math.floor(x / l0))
@@ -61,8 +63,6 @@ def surface(pc, l0):
     m = max(tops) + 1
     h = [tops[j] + 0.5 * l0 if j in tops else 0.0 for j in range(m)]
     # Scale to the particles' own area (count x l0^2): the tops overstate it by up to l0/2.
-    count = sum(1 for i in range(n)
-                if struct.unpack_from("<f", pc.data, i * pc.point_stride + f["kind"])[0] == FLUID_KIND)
     scale = count * l0 * l0 / (sum(h) * l0)
     return [v * scale for v in h]
 
