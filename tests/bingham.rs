@@ -53,7 +53,7 @@ fn bingham_poiseuille(
     let dt_s = 0.05;
     let mut strain = Vec::new();
     for step in 0..20_000 {
-        let stage = predict_velocity(&p, &pairs, &refs, &settings, force, dt_s);
+        let stage = predict_velocity(&p, &pairs, &refs, &settings, force, None, dt_s);
         assert!(stage.solve.converged, "{:?}", stage.solve);
         let change = (0..p.len())
             .map(|i| (stage.velocity_m_s[i] - p.velocity_m_s[i]).norm())

@@ -5,7 +5,8 @@
 //! off, which a test checks), `f64` fields always written as floats in serde_json's shortest
 //! round-trip form, `-0.0` written as `0.0`, integers as integers. Settings added after the
 //! format was first used are left out while they are at their original behaviour
-//! (`mps.ppe_preconditioner: jacobi`, `stop.rest_*` without `stop.rest_metric`, null
+//! (`mps.ppe_preconditioner: jacobi`, `mps.pressure_scheme: standard` with
+//! `mps.compression_relaxation`, `stop.rest_*` without `stop.rest_metric`, null
 //! `mps.wall_collision_*`, `time.dt_min_s` and `stop.max_ghost_particles`, an empty
 //! `boundaries` section), so every experiment keeps the hash it had before they existed and
 //! files written then still verify. JSON is YAML, so the canonical text loads back through
@@ -14,7 +15,7 @@
 use serde_json::Value;
 use sha2::{Digest, Sha256};
 
-use super::types::{Manifest, PpePreconditioner, SceneSection};
+use super::types::{Manifest, PpePreconditioner, PressureSchemeName, SceneSection};
 
 /// Replace every `-0.0` in `value` by `0.0`.
 pub fn normalise_negative_zero(value: &mut Value) {
@@ -37,6 +38,13 @@ pub fn canonical_text<S: SceneSection>(manifest: &Manifest<S>) -> String {
         && let Some(mps) = value.get_mut("mps").and_then(Value::as_object_mut)
     {
         mps.remove("ppe_preconditioner");
+    }
+    if manifest.mps.pressure_scheme == PressureSchemeName::Standard
+        && let Some(mps) = value.get_mut("mps").and_then(Value::as_object_mut)
+    {
+        // The standard scheme does not read the incremental scheme's relaxation.
+        mps.remove("pressure_scheme");
+        mps.remove("compression_relaxation");
     }
     for (section, key) in [
         ("mps", "wall_collision_distance"),

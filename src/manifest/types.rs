@@ -196,6 +196,18 @@ pub struct Mps {
     /// `mixed` (Tanaka & Masunaga 2010: velocity divergence plus relaxed density error).
     #[serde(default = "default_source_term")]
     pub source_term: PpeSource,
+    /// How pressure is found and applied: `standard` (Koshizuka & Oka: the PPE gives the whole
+    /// pressure from `source_term`, gradient with p_j - p_min; files written before the choice
+    /// existed used it) or `incremental` (the pressure is carried between steps and the PPE
+    /// gives its increment from the velocity divergence; consistent gradient, walls mirror
+    /// the pressure hydrostatically: a fluid at rest is an exact fixed point). With
+    /// `incremental`, `source_term` and `relaxation_coefficient` are unused.
+    #[serde(default)]
+    pub pressure_scheme: PressureSchemeName,
+    /// gamma_c of the incremental scheme: relaxation of its compression term
+    /// gamma_c rho/dt^2 max(n* - n0, 0)/n0. In [0, 1]. Unused by `standard`.
+    #[serde(default = "default_compression_relaxation")]
+    pub compression_relaxation: f64,
     /// Artificial compressibility on the PPE diagonal, in 1/Pa.
     #[serde(default = "default_compressibility_1_pa")]
     pub compressibility_1_pa: f64,
@@ -249,6 +261,8 @@ impl Default for Mps {
             surface_threshold: default_surface_threshold(),
             relaxation_coefficient: default_relaxation_coefficient(),
             source_term: default_source_term(),
+            pressure_scheme: PressureSchemeName::default(),
+            compression_relaxation: default_compression_relaxation(),
             ppe_preconditioner: PpePreconditioner::default(),
             compressibility_1_pa: default_compressibility_1_pa(),
             collision_distance: default_collision_distance(),
@@ -283,6 +297,29 @@ fn default_relaxation_coefficient() -> f64 {
 pub enum PpeSource {
     NumberDensity,
     Mixed,
+}
+
+/// Pressure scheme choice (see [`Mps::pressure_scheme`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PressureSchemeName {
+    #[default]
+    Standard,
+    Incremental,
+}
+
+impl PressureSchemeName {
+    /// The manifest's spelling.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Standard => "standard",
+            Self::Incremental => "incremental",
+        }
+    }
+}
+
+fn default_compression_relaxation() -> f64 {
+    0.01
 }
 
 /// PPE preconditioner choice (see [`Mps::ppe_preconditioner`]).

@@ -166,6 +166,11 @@ pub fn check<S: SceneSection>(m: &Manifest<S>) -> Vec<Issue> {
         between(0.0, false, 1.0, true),
     );
     c.real(
+        "mps.compression_relaxation",
+        p.compression_relaxation,
+        between(0.0, true, 1.0, true),
+    );
+    c.real(
         "mps.compressibility_1_pa",
         p.compressibility_1_pa,
         NON_NEGATIVE,

@@ -16,4 +16,6 @@ pub use body::{Path, RigidBody, Segment};
 pub use inlet::Inlet;
 pub use particles::{ParticleKind, Particles, Vector};
 pub use rheology::Rheology;
-pub use solver::{Solver, SolverConfig, SourceTerm, StageTimes, StepError, StepReport};
+pub use solver::{
+    PressureScheme, Solver, SolverConfig, SourceTerm, StageTimes, StepError, StepReport,
+};

@@ -77,3 +77,137 @@ pub fn laplacian<const D: usize, const M: usize>(
     }
     s * (2.0 * D as f64 / (lambda_m2 * n0))
 }
+
+/// Moment matrix M_i = sum_j w_ij r_ij (x) r_ij / |r_ij|^2 over the neighbours within
+/// `radius_m` (Khayyer & Gotoh 2011, corrective matrix; the 1/n0 cancels against the sum it
+/// corrects). On a full regular lattice M = (n0/d) I.
+#[inline]
+pub fn moment_matrix<const D: usize>(
+    positions: &[Vector<D>],
+    nb: &Neighbours,
+    i: usize,
+    radius_m: f64,
+) -> nalgebra::SMatrix<f64, D, D> {
+    let mut m = nalgebra::SMatrix::<f64, D, D>::zeros();
+    for &j in nb.of(i) {
+        let j = j as usize;
+        let r = nb.displacement(positions, i, j);
+        let r2 = r.norm_squared();
+        let w = weight(r2.sqrt(), radius_m);
+        if w > 0.0 {
+            m += r * r.transpose() * (w / r2);
+        }
+    }
+    m
+}
+
+/// The correction that makes `sum_j (phi_j - phi_i) r_ij w / |r_ij|^2` a first-order
+/// consistent gradient: M_i^-1 where M_i is well conditioned, else the uncorrected
+/// normalisation d/n0 (a particle with too few neighbours, e.g. a splash). "Well conditioned":
+/// det M_i at least `min_det_ratio` times that of the full lattice, (n0/d)^d.
+#[inline]
+pub fn gradient_correction<const D: usize>(
+    m: &nalgebra::SMatrix<f64, D, D>,
+    n0: f64,
+    min_det_ratio: f64,
+) -> nalgebra::SMatrix<f64, D, D> {
+    let full = n0 / D as f64;
+    let lattice_det = (0..D).fold(1.0, |v, _| v * full);
+    match determinant_and_inverse(m) {
+        Some((det, inverse)) if det >= min_det_ratio * lattice_det => inverse,
+        _ => nalgebra::SMatrix::<f64, D, D>::identity() * (1.0 / full),
+    }
+}
+
+/// Determinant and inverse of a small matrix by Gauss-Jordan elimination with partial
+/// pivoting (nalgebra's need a dimension bound that a const-generic D lacks); None when a
+/// pivot is zero.
+fn determinant_and_inverse<const D: usize>(
+    m: &nalgebra::SMatrix<f64, D, D>,
+) -> Option<(f64, nalgebra::SMatrix<f64, D, D>)> {
+    let mut a = *m;
+    let mut inverse = nalgebra::SMatrix::<f64, D, D>::identity();
+    let mut det = 1.0;
+    for col in 0..D {
+        let pivot = (col..D)
+            .max_by(|&x, &y| a[(x, col)].abs().total_cmp(&a[(y, col)].abs()))
+            .expect("col < D");
+        if a[(pivot, col)] == 0.0 {
+            return None;
+        }
+        if pivot != col {
+            a.swap_rows(pivot, col);
+            inverse.swap_rows(pivot, col);
+            det = -det;
+        }
+        let d = a[(col, col)];
+        det *= d;
+        for k in 0..D {
+            a[(col, k)] /= d;
+            inverse[(col, k)] /= d;
+        }
+        for row in 0..D {
+            if row != col {
+                let f = a[(row, col)];
+                if f != 0.0 {
+                    for k in 0..D {
+                        a[(row, k)] -= f * a[(col, k)];
+                        inverse[(row, k)] -= f * inverse[(col, k)];
+                    }
+                }
+            }
+        }
+    }
+    Some((det, inverse))
+}
+
+/// Corrected gradient in difference form: C_i sum_j (phi_j - phi_i) r_ij w / |r_ij|^2, with C_i
+/// from [`gradient_correction`]; exact for a linear field on any arrangement where M_i is
+/// well conditioned. `difference(j, r_ij)` gives phi_j - phi_i for every neighbour j (walls
+/// and dummies included: they carry a mirrored value).
+#[inline]
+pub fn corrected_gradient<const D: usize>(
+    positions: &[Vector<D>],
+    nb: &Neighbours,
+    i: usize,
+    radius_m: f64,
+    correction: &nalgebra::SMatrix<f64, D, D>,
+    difference: impl Fn(usize, &Vector<D>) -> f64,
+) -> Vector<D> {
+    let mut g = Vector::<D>::zeros();
+    for &j in nb.of(i) {
+        let j = j as usize;
+        let r = nb.displacement(positions, i, j);
+        let r2 = r.norm_squared();
+        let w = weight(r2.sqrt(), radius_m);
+        if w > 0.0 {
+            g += r * (difference(j, &r) * w / r2);
+        }
+    }
+    correction * g
+}
+
+/// Corrected divergence of a vector field: trace(C_i sum_j (u_j - u_i) (x) r_ij w / |r_ij|^2),
+/// exact for a linear field where M_i is well conditioned. `difference(j)` gives u_j - u_i.
+#[inline]
+pub fn corrected_divergence<const D: usize>(
+    positions: &[Vector<D>],
+    nb: &Neighbours,
+    i: usize,
+    radius_m: f64,
+    correction: &nalgebra::SMatrix<f64, D, D>,
+    difference: impl Fn(usize) -> Vector<D>,
+) -> f64 {
+    let mut g = nalgebra::SMatrix::<f64, D, D>::zeros();
+    for &j in nb.of(i) {
+        let j = j as usize;
+        let r = nb.displacement(positions, i, j);
+        let r2 = r.norm_squared();
+        let w = weight(r2.sqrt(), radius_m);
+        if w > 0.0 {
+            g += difference(j) * (r.transpose() * (w / r2));
+        }
+    }
+    // d u_a / d x_b = sum_c G_ac C_cb; the trace is sum_a sum_c G_ac C_ca.
+    (g * correction).trace()
+}

@@ -14,6 +14,8 @@ use super::viscosity::{ViscousSettings, predict_velocity};
 use rayon::prelude::*;
 use std::time::Instant;
 
+mod incremental;
+
 /// Physical and numerical parameters of the solver, all in SI units.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SolverConfig<const D: usize> {
@@ -33,6 +35,11 @@ pub struct SolverConfig<const D: usize> {
     /// gamma: relaxation of the number-density source term.
     pub relaxation_coefficient: f64,
     pub source_term: SourceTerm,
+    /// How pressure is computed and applied (see [`PressureScheme`]).
+    pub pressure_scheme: PressureScheme,
+    /// gamma_c of the incremental scheme: relaxation of its compression term
+    /// gamma_c rho/dt^2 max(n*_i - n0, 0)/n0 (volume kept where the velocity source drifts).
+    pub compression_relaxation: f64,
     /// Aggregation multigrid instead of Jacobi as the PPE preconditioner.
     pub multigrid_ppe: bool,
     pub compressibility_1_pa: f64,
@@ -70,6 +77,21 @@ pub enum SourceTerm {
     /// -(rho/dt) div(u*)_i + gamma rho/dt^2 (n^k_i - n0)/n0 with n^k at the start of the step
     /// (Tanaka & Masunaga 2010): much less pressure noise.
     Mixed,
+}
+
+/// How the pressure is found and applied.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PressureScheme {
+    /// Koshizuka & Oka: the PPE gives the whole pressure each step (source per
+    /// [`SourceTerm`]), wall particles carry PPE pressure, dummies none, and the gradient uses
+    /// p_j - min p over the neighbourhood.
+    Standard,
+    /// Incremental projection (see `incremental.rs`): the pressure is carried from step to
+    /// step and enters the prediction; the PPE solves for its increment from the velocity
+    /// divergence of u*; the gradient is first-order consistent (corrective matrix,
+    /// difference form); walls and dummies mirror the pressure hydrostatically. A fluid at
+    /// rest under hydrostatic pressure is then a fixed point of the step.
+    Incremental,
 }
 
 /// The fluid-wall collision distance for a fluid-fluid one of `collision_distance_m`.
@@ -318,6 +340,8 @@ impl<const D: usize> Solver<D> {
             SourceTerm::Mixed => Some(self.number_density()),
             SourceTerm::NumberDensity => None,
         };
+        let incremental = self.config.pressure_scheme == PressureScheme::Incremental;
+        let pressure_accel = incremental.then(|| self.carried_pressure_acceleration());
         let viscosity_started = Instant::now();
         let stage = predict_velocity(
             &self.particles,
@@ -325,6 +349,7 @@ impl<const D: usize> Solver<D> {
             &self.refs,
             &self.viscous_settings(),
             self.gravity(),
+            pressure_accel.as_deref(),
             dt_s,
         );
         self.timing.viscosity_s += viscosity_started.elapsed().as_secs_f64();
@@ -369,43 +394,12 @@ impl<const D: usize> Solver<D> {
         self.collide(dt_s, false);
         self.refresh_pairs();
 
-        // (3) Number density n*, free surface, pressure Poisson equation.
-        let pressure_started = Instant::now();
-        let number_density = self.number_density();
-        let threshold = self.config.surface_threshold * self.refs.n0;
-        let surface: Vec<bool> = number_density
-            .par_iter()
-            .with_min_len(PARTICLES_PER_TASK)
-            .map(|&n| n < threshold)
-            .collect();
-        let source =
-            self.pressure_source(dt_s, start_density.as_deref().unwrap_or(&number_density));
-        let kind = &self.particles.kind;
-        let surface_count = (0..kind.len())
-            .into_par_iter()
-            .with_min_len(PARTICLES_PER_TASK)
-            .filter(|&i| kind[i] == ParticleKind::Fluid && surface[i])
-            .count();
-        let (ppe, solve_s) = self.solve_pressure(dt_s, &source, &surface);
-        self.timing.pressure_solve_s += solve_s;
-        self.timing.ppe_iterations += u64::from(ppe.iterations);
-        self.timing.pressure_assembly_s += pressure_started.elapsed().as_secs_f64() - solve_s;
-        if ppe.relative_residual.is_nan() {
-            return Err(StepError::NonFiniteSolve {
-                solve: "pressure",
-                step: self.step,
-            });
-        }
-        if !ppe.converged {
-            return Err(StepError::PressureNotConverged {
-                residual: ppe.relative_residual,
-                iterations: ppe.iterations,
-                step: self.step,
-            });
-        }
-
-        // (4) Correct velocity and position with the pressure gradient.
-        self.correct_with_pressure_gradient(dt_s);
+        // (3) Pressure, (4) correction of velocity and position.
+        let (ppe, surface_count) = if incremental {
+            self.incremental_projection(dt_s)?
+        } else {
+            self.standard_projection(dt_s, start_density.as_deref())?
+        };
         if self.config.wall_collision_second_pass {
             // The correction can push a free-surface particle into a gap of the wall lattice
             // (see `wall_collision_distance_m`): fluid-wall pairs collide once more.
@@ -422,6 +416,58 @@ impl<const D: usize> Solver<D> {
             non_flowing_fraction,
             surface_count,
         })
+    }
+
+    /// (3)-(4) of the standard scheme: n*, free surface, PPE for the whole pressure, and the
+    /// correction with the p_j - p_min gradient. Returns the PPE report and the surface count.
+    fn standard_projection(
+        &mut self,
+        dt_s: f64,
+        start_density: Option<&[f64]>,
+    ) -> Result<(SolveReport, usize), StepError> {
+        // Number density n*, free surface, pressure Poisson equation.
+        let pressure_started = Instant::now();
+        let number_density = self.number_density();
+        let threshold = self.config.surface_threshold * self.refs.n0;
+        let surface: Vec<bool> = number_density
+            .par_iter()
+            .with_min_len(PARTICLES_PER_TASK)
+            .map(|&n| n < threshold)
+            .collect();
+        let source = self.pressure_source(dt_s, start_density.unwrap_or(&number_density));
+        let kind = &self.particles.kind;
+        let surface_count = (0..kind.len())
+            .into_par_iter()
+            .with_min_len(PARTICLES_PER_TASK)
+            .filter(|&i| kind[i] == ParticleKind::Fluid && surface[i])
+            .count();
+        let (ppe, solve_s) = self.solve_pressure(dt_s, &source, &surface);
+        self.timing.pressure_solve_s += solve_s;
+        self.timing.ppe_iterations += u64::from(ppe.iterations);
+        self.timing.pressure_assembly_s += pressure_started.elapsed().as_secs_f64() - solve_s;
+        self.check_pressure_solve(&ppe)?;
+
+        // (4) Correct velocity and position with the pressure gradient.
+        self.correct_with_pressure_gradient(dt_s);
+        Ok((ppe, surface_count))
+    }
+
+    /// A PPE solve that met a non-finite value or did not converge fails the step.
+    fn check_pressure_solve(&self, ppe: &SolveReport) -> Result<(), StepError> {
+        if ppe.relative_residual.is_nan() {
+            return Err(StepError::NonFiniteSolve {
+                solve: "pressure",
+                step: self.step,
+            });
+        }
+        if !ppe.converged {
+            return Err(StepError::PressureNotConverged {
+                residual: ppe.relative_residual,
+                iterations: ppe.iterations,
+                step: self.step,
+            });
+        }
+        Ok(())
     }
 
     /// Whether particle i flowed at the start of the last step (false before any step).
@@ -707,8 +753,28 @@ impl<const D: usize> Solver<D> {
         // resumed runs start the solver from the same guess).
         let mut solution: Vec<f64> = rows.iter().map(|&i| p.pressure_pa[i]).collect();
         let solve_started = Instant::now();
-        // Multigrid: each unknown's lattice cell (spacings from the origin) sets its
-        // aggregates.
+        let report = self.solve_ppe_system(&matrix, &rhs, &mut solution, &rows);
+        let solve_s = solve_started.elapsed().as_secs_f64();
+        let pressure = &mut self.particles.pressure_pa;
+        pressure.iter_mut().for_each(|v| *v = 0.0);
+        for (k, &i) in rows.iter().enumerate() {
+            pressure[i] = solution[k].max(0.0);
+        }
+        (report, solve_s)
+    }
+
+    /// Solves the PPE `matrix` (rows at particles `rows`) by PCG from the guess in `solution`,
+    /// preconditioned by Jacobi or by aggregation multigrid, whose aggregates follow each
+    /// unknown's lattice cell (spacings from the origin).
+    fn solve_ppe_system(
+        &self,
+        matrix: &CsrMatrix,
+        rhs: &[f64],
+        solution: &mut [f64],
+        rows: &[usize],
+    ) -> SolveReport {
+        let c = &self.config;
+        let p = &self.particles;
         let multigrid = c.multigrid_ppe.then(|| {
             let l0 = c.spacing_m;
             let cells: Vec<[i64; 3]> = rows
@@ -718,25 +784,18 @@ impl<const D: usize> Solver<D> {
                     std::array::from_fn(|a| if a < D { (x[a] / l0).floor() as i64 } else { 0 })
                 })
                 .collect();
-            Multigrid::new(&matrix, &cells)
+            Multigrid::new(matrix, &cells)
         });
-        let report = solve_pcg(
-            &matrix,
-            &rhs,
-            &mut solution,
+        solve_pcg(
+            matrix,
+            rhs,
+            solution,
             c.ppe_tolerance,
             c.ppe_max_iterations,
             multigrid
                 .as_ref()
                 .map_or(Preconditioner::Jacobi, Preconditioner::Multigrid),
-        );
-        let solve_s = solve_started.elapsed().as_secs_f64();
-        let pressure = &mut self.particles.pressure_pa;
-        pressure.iter_mut().for_each(|v| *v = 0.0);
-        for (k, &i) in rows.iter().enumerate() {
-            pressure[i] = solution[k].max(0.0);
-        }
-        (report, solve_s)
+        )
     }
 
     /// u += -dt/rho <grad p>, r += dt * (change of u), with the gradient model (eq. 3) using

@@ -61,7 +61,9 @@ pub fn strain_invariant<const D: usize>(g: &SMatrix<f64, D, D>) -> f64 {
     2.0 * e.component_mul(&e).sum()
 }
 
-/// Implicit viscous predictor: u* solves u* - dt V(u*) = u^n + dt f, with the viscosity
+/// Implicit viscous predictor: u* solves u* - dt V(u*) = u^n + dt f, with f the body force
+/// plus, for the incremental pressure scheme, the acceleration -grad(p^n)/rho of the pressure
+/// carried from the last step (`pressure_accel_m_s2`, per particle). The viscosity is
 /// taken from the strain rate of u^n. Two forms of the viscous term V:
 /// - without the eq. 8 term: nu_i <lap u>_i (seed 000 eq. 8 without its fourth term). Each
 ///   row is divided by dt nu_i, which makes the matrix symmetric positive definite:
@@ -80,6 +82,7 @@ pub fn predict_velocity<const D: usize>(
     refs: &RefValues,
     settings: &ViscousSettings,
     body_force_m_s2: Vector<D>,
+    pressure_accel_m_s2: Option<&[Vector<D>]>,
     dt_s: f64,
 ) -> ViscousStage<D> {
     let rho = settings.density_kg_m3;
@@ -108,7 +111,11 @@ pub fn predict_velocity<const D: usize>(
         .with_min_len(PARTICLES_PER_TASK)
         .map(|i| {
             if is_fluid(i) {
-                p.velocity_m_s[i] + body_force_m_s2 * dt_s
+                let force = match pressure_accel_m_s2 {
+                    Some(a) => body_force_m_s2 + a[i],
+                    None => body_force_m_s2,
+                };
+                p.velocity_m_s[i] + force * dt_s
             } else {
                 p.velocity_m_s[i]
             }

@@ -1,7 +1,7 @@
 //! The solver's configuration from a manifest and its test's scene.
 use crate::experiment::{Manifest, Scene};
-use crate::manifest::{Fluid, PpePreconditioner, PpeSource};
-use crate::mps::{Rheology, SolverConfig, SourceTerm};
+use crate::manifest::{Fluid, PpePreconditioner, PpeSource, PressureSchemeName};
+use crate::mps::{PressureScheme, Rheology, SolverConfig, SourceTerm};
 
 /// The rheology a manifest's fluid section describes, and whether eq. 8's term is on.
 pub fn rheology(fluid: &Fluid) -> (Rheology, bool) {
@@ -59,6 +59,11 @@ pub fn solver_config<const D: usize>(m: &Manifest, scene: &Scene<D>) -> SolverCo
             PpeSource::NumberDensity => SourceTerm::NumberDensity,
             PpeSource::Mixed => SourceTerm::Mixed,
         },
+        pressure_scheme: match m.mps.pressure_scheme {
+            PressureSchemeName::Standard => PressureScheme::Standard,
+            PressureSchemeName::Incremental => PressureScheme::Incremental,
+        },
+        compression_relaxation: m.mps.compression_relaxation,
         compressibility_1_pa: m.mps.compressibility_1_pa,
         collision_distance_m: m.mps.collision_distance * l0,
         wall_collision_distance_m: match m.mps.wall_collision_distance {

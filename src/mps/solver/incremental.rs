@@ -1,0 +1,289 @@
+//! The incremental pressure scheme ([`PressureScheme::Incremental`]): a fluid at rest under
+//! hydrostatic pressure is a fixed point of the step, on any arrangement of the particles.
+//!
+//! The standard scheme solves for the whole pressure each step from the compression of the
+//! predicted positions. Its rest state is no equilibrium: the gradient (p_j - p_min form) gives
+//! a flat surface's top row half the support it needs, pressureless dummies leave a few per
+//! cent of g at the walls, and the surface truncates the Laplacian's stencil, so the PPE's
+//! answer is not hydrostatic near the surface (`shared/reference/quiet-mps.md`, section 1).
+//! Here instead (a pressure-correction projection, van Kan 1986, with MPS operators):
+//! - the pressure p^n is carried from the last step and its force enters the prediction:
+//!   u* = u^n + dt (viscous + g - grad(p^n)/rho);
+//! - the PPE gives the increment: -lap(dp) = -(rho/dt) div(u*) + gamma_c rho/dt^2
+//!   max(n* - n0, 0)/n0, dp = -p^n on the free surface (so that p^(n+1) = 0 there), and a
+//!   zero normal derivative at walls (their velocity enters through div(u*));
+//! - u^(n+1) = u* - (dt/rho) grad(dp), p^(n+1) = max(p^n + dp, 0).
+//!
+//! Gradients are first-order consistent (corrective matrix, difference form, Khayyer & Gotoh
+//! 2011), and wall and dummy neighbours j of fluid particle i carry the pressure
+//! p_i + rho g . r_ij (Neumann-consistent: hydrostatic along the wall normal; Adami et al.
+//! 2012 in SPH), so a linear hydrostatic field has the exact gradient rho g at every fluid
+//! particle. At rest with p^n hydrostatic, u* = 0, the source is zero, dp = 0 and nothing
+//! moves, whatever the Laplacian's truncation: the Laplacian only sets how fast a
+//! disturbance is projected out, not where the rest state lies.
+use super::{PARTICLES_PER_TASK, ParticleKind, PressureScheme, SolveReport, Solver, StepError};
+use crate::mps::kernel::weight;
+use crate::mps::operators::{
+    corrected_divergence, corrected_gradient, gradient_correction, moment_matrix,
+};
+use crate::mps::particles::Vector;
+use crate::mps::pressure::CsrMatrix;
+use nalgebra::SMatrix;
+use rayon::prelude::*;
+use std::time::Instant;
+
+/// The corrective matrix is used where det M_i is at least this share of the full lattice's;
+/// below it (a particle with neighbours on one side only: a splash, a thin jet) the gradient
+/// falls back to the uncorrected normalisation, whose error there is bounded.
+const MIN_DET_RATIO: f64 = 0.05;
+
+impl<const D: usize> Solver<D> {
+    /// Corrective matrix of every fluid particle at the current positions (identity-scaled
+    /// fallback elsewhere; non-fluid entries are unused).
+    fn gradient_corrections(&self) -> Vec<SMatrix<f64, D, D>> {
+        let p = &self.particles;
+        let nb = &self.pairs.near;
+        let refs = self.refs;
+        (0..p.len())
+            .into_par_iter()
+            .with_min_len(PARTICLES_PER_TASK)
+            .with_max_len(PARTICLES_PER_TASK)
+            .map(|i| {
+                if p.kind[i] == ParticleKind::Fluid {
+                    let m = moment_matrix(&p.position_m, nb, i, refs.radius_n_m);
+                    gradient_correction(&m, refs.n0, MIN_DET_RATIO)
+                } else {
+                    SMatrix::<f64, D, D>::zeros()
+                }
+            })
+            .collect()
+    }
+
+    /// -grad(p^n)/rho at every fluid particle (zero elsewhere), at the current positions: the
+    /// carried pressure's force in the prediction. Wall and dummy neighbours carry
+    /// p_i + rho g . r_ij.
+    pub(super) fn carried_pressure_acceleration(&self) -> Vec<Vector<D>> {
+        debug_assert_eq!(self.config.pressure_scheme, PressureScheme::Incremental);
+        let corrections = self.gradient_corrections();
+        let p = &self.particles;
+        let nb = &self.pairs.near;
+        let rho = self.config.density_kg_m3;
+        let rho_g = self.gravity() * rho;
+        (0..p.len())
+            .into_par_iter()
+            .with_min_len(PARTICLES_PER_TASK)
+            .with_max_len(PARTICLES_PER_TASK)
+            .map(|i| {
+                if p.kind[i] != ParticleKind::Fluid {
+                    return Vector::<D>::zeros();
+                }
+                let pi = p.pressure_pa[i];
+                let wall_base =
+                    wall_reference(p, nb, self.refs.radius_n_m, i, &p.pressure_pa, rho_g) - pi;
+                let g = corrected_gradient(
+                    &p.position_m,
+                    nb,
+                    i,
+                    self.refs.radius_n_m,
+                    &corrections[i],
+                    |j, r| {
+                        if p.kind[j] == ParticleKind::Fluid {
+                            p.pressure_pa[j] - pi
+                        } else {
+                            wall_base + rho_g.dot(r)
+                        }
+                    },
+                );
+                g * (-1.0 / rho)
+            })
+            .collect()
+    }
+
+    /// Steps (3) and (4) of the incremental scheme at the predicted positions: n*, free
+    /// surface, the PPE for the increment dp, the correction with grad(dp) and the new
+    /// carried pressure. Returns the PPE report and the count of surface particles.
+    pub(super) fn incremental_projection(
+        &mut self,
+        dt_s: f64,
+    ) -> Result<(SolveReport, usize), StepError> {
+        let pressure_started = Instant::now();
+        let c = &self.config;
+        let refs = self.refs;
+        let rho = c.density_kg_m3;
+        let number_density = self.number_density();
+        let corrections = self.gradient_corrections();
+        let p = &self.particles;
+        let is_fluid = |i: usize| p.kind[i] == ParticleKind::Fluid;
+        let threshold = c.surface_threshold * refs.n0;
+        let surface: Vec<bool> = (0..p.len())
+            .map(|i| is_fluid(i) && number_density[i] < threshold)
+            .collect();
+        let surface_count = surface.iter().filter(|&&s| s).count();
+        let mut unknown_of = vec![u32::MAX; p.len()];
+        let mut rows = Vec::new();
+        for i in 0..p.len() {
+            if is_fluid(i) && !surface[i] {
+                unknown_of[i] = rows.len() as u32;
+                rows.push(i);
+            }
+        }
+        // Source: -(rho/dt) div(u*) with walls at their own velocity (no penetration), plus
+        // the relaxed compression term.
+        let compression_scale = c.compression_relaxation * rho / (dt_s * dt_s);
+        let near = &self.pairs.near;
+        let source: Vec<f64> = rows
+            .par_iter()
+            .with_min_len(PARTICLES_PER_TASK)
+            .with_max_len(PARTICLES_PER_TASK)
+            .map(|&i| {
+                let ui = p.velocity_m_s[i];
+                let div = corrected_divergence(
+                    &p.position_m,
+                    near,
+                    i,
+                    refs.radius_n_m,
+                    &corrections[i],
+                    |j| p.velocity_m_s[j] - ui,
+                );
+                let compression = (number_density[i] - refs.n0).max(0.0) / refs.n0;
+                -rho / dt_s * div + compression_scale * compression
+            })
+            .collect();
+        // -lap(dp) over fluid neighbours only: a wall's dp mirrors the particle's (zero
+        // normal derivative), so its term vanishes. Surface neighbours are known: dp = -p^n.
+        let lap = &self.pairs.lap;
+        let coef = 2.0 * D as f64 / (refs.lambda_m2 * refs.n0_lap);
+        let diag_extra = rho * c.compressibility_1_pa / (dt_s * dt_s);
+        let (matrix, known) = CsrMatrix::assemble(rows.len(), |k, columns, values| {
+            let i = rows[k];
+            let mut diag = diag_extra;
+            let mut known = 0.0;
+            for &j in lap.of(i) {
+                let j = j as usize;
+                if !is_fluid(j) {
+                    continue;
+                }
+                let a = coef
+                    * weight(
+                        lap.displacement(&p.position_m, i, j).norm(),
+                        refs.radius_lap_m,
+                    );
+                if a == 0.0 {
+                    continue;
+                }
+                diag += a;
+                if unknown_of[j] != u32::MAX {
+                    columns.push(unknown_of[j]);
+                    values.push(-a);
+                } else {
+                    known += a * -p.pressure_pa[j];
+                }
+            }
+            (diag, known)
+        });
+        let rhs: Vec<f64> = source.iter().zip(&known).map(|(s, k)| s + k).collect();
+        // The increment is small once the carried pressure has settled: start from zero.
+        let mut solution = vec![0.0; rows.len()];
+        let solve_started = Instant::now();
+        let ppe = self.solve_ppe_system(&matrix, &rhs, &mut solution, &rows);
+        let solve_s = solve_started.elapsed().as_secs_f64();
+        self.timing.pressure_solve_s += solve_s;
+        self.timing.ppe_iterations += u64::from(ppe.iterations);
+        self.check_pressure_solve(&ppe)?;
+
+        // New carried pressure and the increment actually applied (after the clip at 0).
+        let p = &self.particles;
+        let new_pressure: Vec<f64> = (0..p.len())
+            .map(|i| match unknown_of[i] {
+                u32::MAX => 0.0,
+                k => (p.pressure_pa[i] + solution[k as usize]).max(0.0),
+            })
+            .collect();
+        let increment: Vec<f64> = (0..p.len())
+            .map(|i| {
+                if is_fluid(i) {
+                    new_pressure[i] - p.pressure_pa[i]
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        let scale = -dt_s / rho;
+        let dv: Vec<Vector<D>> = (0..p.len())
+            .into_par_iter()
+            .with_min_len(PARTICLES_PER_TASK)
+            .with_max_len(PARTICLES_PER_TASK)
+            .map(|i| {
+                if !is_fluid(i) {
+                    return Vector::<D>::zeros();
+                }
+                let di = increment[i];
+                let wall_base = wall_reference(
+                    p,
+                    near,
+                    refs.radius_n_m,
+                    i,
+                    &increment,
+                    Vector::<D>::zeros(),
+                ) - di;
+                corrected_gradient(
+                    &p.position_m,
+                    near,
+                    i,
+                    refs.radius_n_m,
+                    &corrections[i],
+                    |j, _| {
+                        if is_fluid(j) {
+                            increment[j] - di
+                        } else {
+                            wall_base
+                        }
+                    },
+                ) * scale
+            })
+            .collect();
+        self.timing.pressure_assembly_s += pressure_started.elapsed().as_secs_f64() - solve_s;
+        let p = &mut self.particles;
+        p.pressure_pa = new_pressure;
+        super::per_particle(&mut p.velocity_m_s, &mut p.position_m, |i, v, x| {
+            *v += dv[i];
+            *x += dv[i] * dt_s;
+        });
+        Ok((ppe, surface_count))
+    }
+}
+
+/// The value that walls and dummies near fluid particle i mirror: the weighted mean over i's
+/// fluid neighbours (i excluded) of v_f + rho_g . (r_i - r_f), their value carried
+/// hydrostatically to i. Exact for a hydrostatic field; using it instead of v_i keeps the
+/// walls from echoing i's own deviation (an odd-even pressure mode, which the consistent
+/// gradient does not see in the interior, would otherwise push on the wall rows). Falls back to
+/// v_i without fluid neighbours.
+fn wall_reference<const D: usize>(
+    p: &crate::mps::particles::Particles<D>,
+    nb: &crate::mps::grid::Neighbours,
+    radius_m: f64,
+    i: usize,
+    values: &[f64],
+    rho_g: Vector<D>,
+) -> f64 {
+    let mut sum = 0.0;
+    let mut weights = 0.0;
+    for &j in nb.of(i) {
+        let j = j as usize;
+        if p.kind[j] != ParticleKind::Fluid {
+            continue;
+        }
+        let r = nb.displacement(&p.position_m, i, j);
+        let w = weight(r.norm(), radius_m);
+        if w > 0.0 {
+            sum += w * (values[j] - rho_g.dot(&r));
+            weights += w;
+        }
+    }
+    if weights > 0.0 {
+        sum / weights
+    } else {
+        values[i]
+    }
+}
