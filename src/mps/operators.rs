@@ -52,6 +52,31 @@ pub fn gradient<const D: usize>(
     g * (D as f64 / n0)
 }
 
+/// Divergence model: d/n0 sum_j (u_j - u_i) . r_ij w(|r_ij|) / |r_ij|^2, where
+/// `difference(j)` returns u_j - u_i. Only the pair's radial relative velocity counts, so a
+/// shear along a no-slip wall adds nothing.
+#[inline]
+pub fn divergence<const D: usize>(
+    positions: &[Vector<D>],
+    nb: &Neighbours,
+    i: usize,
+    radius_m: f64,
+    n0: f64,
+    difference: impl Fn(usize) -> Vector<D>,
+) -> f64 {
+    let mut s = 0.0;
+    for &j in nb.of(i) {
+        let j = j as usize;
+        let r = nb.displacement(positions, i, j);
+        let r2 = r.norm_squared();
+        let w = weight(r2.sqrt(), radius_m);
+        if w > 0.0 {
+            s += difference(j).dot(&r) * w / r2;
+        }
+    }
+    s * (D as f64 / n0)
+}
+
 /// Laplacian model (eq. 4) of a vector field: 2d/(lambda n0) sum_j (u_j - u_i) w(|r_ij|),
 /// where `difference(j)` returns u_j - u_i (or None to skip j).
 #[inline]
@@ -185,29 +210,4 @@ pub fn corrected_gradient<const D: usize>(
         }
     }
     correction * g
-}
-
-/// Corrected divergence of a vector field: trace(C_i sum_j (u_j - u_i) (x) r_ij w / |r_ij|^2),
-/// exact for a linear field where M_i is well conditioned. `difference(j)` gives u_j - u_i.
-#[inline]
-pub fn corrected_divergence<const D: usize>(
-    positions: &[Vector<D>],
-    nb: &Neighbours,
-    i: usize,
-    radius_m: f64,
-    correction: &nalgebra::SMatrix<f64, D, D>,
-    difference: impl Fn(usize) -> Vector<D>,
-) -> f64 {
-    let mut g = nalgebra::SMatrix::<f64, D, D>::zeros();
-    for &j in nb.of(i) {
-        let j = j as usize;
-        let r = nb.displacement(positions, i, j);
-        let r2 = r.norm_squared();
-        let w = weight(r2.sqrt(), radius_m);
-        if w > 0.0 {
-            g += difference(j) * (r.transpose() * (w / r2));
-        }
-    }
-    // d u_a / d x_b = sum_c G_ac C_cb; the trace is sum_a sum_c G_ac C_ca.
-    (g * correction).trace()
 }

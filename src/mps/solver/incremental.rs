@@ -11,7 +11,9 @@
 //!   u* = u^n + dt (viscous + g - grad(p^n)/rho);
 //! - the PPE gives the increment: -lap(dp) = -(rho/dt) div(u*) + gamma_c rho/dt^2
 //!   max(n* - n0, 0)/n0, dp = -p^n on the free surface (so that p^(n+1) = 0 there), and a
-//!   zero normal derivative at walls (their velocity enters through div(u*));
+//!   zero normal derivative at walls (their velocity enters through div(u*), the
+//!   uncorrected MPS divergence: only each pair's radial relative velocity counts, so shear
+//!   along a no-slip wall makes no source, which the corrected one made at a dam-break toe);
 //! - u^(n+1) = u* - (dt/rho) grad(dp), p^(n+1) = max(p^n + dp, 0).
 //!
 //! Gradients are first-order consistent (corrective matrix, difference form, Khayyer & Gotoh
@@ -23,9 +25,7 @@
 //! disturbance is projected out, not where the rest state lies.
 use super::{PARTICLES_PER_TASK, ParticleKind, PressureScheme, SolveReport, Solver, StepError};
 use crate::mps::kernel::weight;
-use crate::mps::operators::{
-    corrected_divergence, corrected_gradient, gradient_correction, moment_matrix,
-};
+use crate::mps::operators::{corrected_gradient, divergence, gradient_correction, moment_matrix};
 use crate::mps::particles::Vector;
 use crate::mps::pressure::CsrMatrix;
 use nalgebra::SMatrix;
@@ -114,6 +114,10 @@ impl<const D: usize> Solver<D> {
         let corrections = self.gradient_corrections();
         let p = &self.particles;
         let is_fluid = |i: usize| p.kind[i] == ParticleKind::Fluid;
+        // Fluid below the threshold is on the surface: its increment is known, -p^n (so that
+        // p^(n+1) = 0). The other fluid particles are the unknowns. Walls have none: the
+        // increment's normal derivative is zero there (measured: with walls as unknowns, as
+        // in the standard scheme, the tank at rest diverges within 3 s at dt/2).
         let threshold = c.surface_threshold * refs.n0;
         let surface: Vec<bool> = (0..p.len())
             .map(|i| is_fluid(i) && number_density[i] < threshold)
@@ -127,8 +131,9 @@ impl<const D: usize> Solver<D> {
                 rows.push(i);
             }
         }
-        // Source: -(rho/dt) div(u*) with walls at their own velocity (no penetration), plus
-        // the relaxed compression term.
+        // Source: -(rho/dt) div(u*), walls at their own velocity (no penetration; only the
+        // radial relative velocity of each pair counts, so shear along a no-slip wall makes
+        // none), plus the relaxed compression term.
         let compression_scale = c.compression_relaxation * rho / (dt_s * dt_s);
         let near = &self.pairs.near;
         let source: Vec<f64> = rows
@@ -137,20 +142,15 @@ impl<const D: usize> Solver<D> {
             .with_max_len(PARTICLES_PER_TASK)
             .map(|&i| {
                 let ui = p.velocity_m_s[i];
-                let div = corrected_divergence(
-                    &p.position_m,
-                    near,
-                    i,
-                    refs.radius_n_m,
-                    &corrections[i],
-                    |j| p.velocity_m_s[j] - ui,
-                );
+                let div = divergence(&p.position_m, near, i, refs.radius_n_m, refs.n0, |j| {
+                    p.velocity_m_s[j] - ui
+                });
                 let compression = (number_density[i] - refs.n0).max(0.0) / refs.n0;
                 -rho / dt_s * div + compression_scale * compression
             })
             .collect();
-        // -lap(dp) over fluid neighbours only: a wall's dp mirrors the particle's (zero
-        // normal derivative), so its term vanishes. Surface neighbours are known: dp = -p^n.
+        // -lap(dp) over fluid neighbours: a wall's increment mirrors the particle's, so its term
+        // vanishes.
         let lap = &self.pairs.lap;
         let coef = 2.0 * D as f64 / (refs.lambda_m2 * refs.n0_lap);
         let diag_extra = rho * c.compressibility_1_pa / (dt_s * dt_s);
@@ -176,7 +176,7 @@ impl<const D: usize> Solver<D> {
                     columns.push(unknown_of[j]);
                     values.push(-a);
                 } else {
-                    known += a * -p.pressure_pa[j];
+                    known -= a * p.pressure_pa[j];
                 }
             }
             (diag, known)
@@ -232,12 +232,9 @@ impl<const D: usize> Solver<D> {
                     i,
                     refs.radius_n_m,
                     &corrections[i],
-                    |j, _| {
-                        if is_fluid(j) {
-                            increment[j] - di
-                        } else {
-                            wall_base
-                        }
+                    |j, _| match p.kind[j] {
+                        ParticleKind::Fluid => increment[j] - di,
+                        _ => wall_base,
                     },
                 ) * scale
             })
