@@ -35,6 +35,9 @@ pub struct RunInfo {
     /// when it ran to `time.end_s` (and in files written before the field existed); `None`
     /// without a `/summary` message.
     pub stop_rule: Option<String>,
+    /// `mps.pressure_scheme` of the stored manifest (`standard` when the canonical form leaves
+    /// it out, as it does for that default); `None` without a readable manifest.
+    pub pressure_scheme: Option<String>,
     /// The `build` metadata: crate_version, git_commit, rustc, target, profile.
     pub build: BTreeMap<String, String>,
     /// Worker threads of the run (`run` metadata; informational).
@@ -187,6 +190,13 @@ pub fn run_info(path: &Path, size_bytes: u64, run: &RunFile) -> RunInfo {
         outcome,
         reason,
         stop_rule: summary.map(|s| s.stop.clone()),
+        pressure_scheme: super::canonical_manifest(&run).map(|m| {
+            m.get("mps")
+                .and_then(|mps| mps.get("pressure_scheme"))
+                .and_then(|v| v.as_str())
+                .unwrap_or("standard")
+                .to_string()
+        }),
         build: run.metadata.get(META_BUILD).cloned().unwrap_or_default(),
         threads: meta(META_RUN, "threads"),
         particles: Particles {
@@ -258,6 +268,13 @@ impl fmt::Display for RunInfo {
             Some(rule) => rule.to_string(),
         };
         lines.push(("stop rule", stop));
+        lines.push((
+            "scheme",
+            format!(
+                "mps.pressure_scheme {}",
+                or_dash(self.pressure_scheme.as_deref())
+            ),
+        ));
         let b = |k: &str| or_dash(self.build.get(k));
         lines.push((
             "build",
