@@ -36,6 +36,20 @@ pub fn gradient<const D: usize>(
     n0: f64,
     difference: impl Fn(usize) -> Option<f64>,
 ) -> Vector<D> {
+    difference_sum(positions, nb, i, radius_m, |j, _| difference(j)) * (D as f64 / n0)
+}
+
+/// sum_j (phi_j - phi_i) r_ij w(|r_ij|) / |r_ij|^2 over the neighbours within `radius_m`, with
+/// `difference(j, r_ij)` giving phi_j - phi_i (None skips j): the sum both gradient models
+/// normalise.
+#[inline]
+fn difference_sum<const D: usize>(
+    positions: &[Vector<D>],
+    nb: &Neighbours,
+    i: usize,
+    radius_m: f64,
+    difference: impl Fn(usize, &Vector<D>) -> Option<f64>,
+) -> Vector<D> {
     let mut g = Vector::<D>::zeros();
     for &j in nb.of(i) {
         let j = j as usize;
@@ -45,11 +59,11 @@ pub fn gradient<const D: usize>(
         if w == 0.0 {
             continue;
         }
-        if let Some(d) = difference(j) {
+        if let Some(d) = difference(j, &r) {
             g += r * (d * w / r2);
         }
     }
-    g * (D as f64 / n0)
+    g
 }
 
 /// Divergence model: d/n0 sum_j (u_j - u_i) . r_ij w(|r_ij|) / |r_ij|^2, where
@@ -199,15 +213,5 @@ pub fn corrected_gradient<const D: usize>(
     correction: &nalgebra::SMatrix<f64, D, D>,
     difference: impl Fn(usize, &Vector<D>) -> f64,
 ) -> Vector<D> {
-    let mut g = Vector::<D>::zeros();
-    for &j in nb.of(i) {
-        let j = j as usize;
-        let r = nb.displacement(positions, i, j);
-        let r2 = r.norm_squared();
-        let w = weight(r2.sqrt(), radius_m);
-        if w > 0.0 {
-            g += r * (difference(j, &r) * w / r2);
-        }
-    }
-    correction * g
+    correction * difference_sum(positions, nb, i, radius_m, |j, r| Some(difference(j, r)))
 }

@@ -701,11 +701,7 @@ impl<const D: usize> Solver<D> {
         source: &[f64],
         surface: &[bool],
     ) -> (SolveReport, f64) {
-        let c = &self.config;
         let p = &self.particles;
-        let nb = &self.pairs.lap;
-        let refs = self.refs;
-        let rho = c.density_kg_m3;
         let unknown_of: Vec<u32> = {
             let mut next = 0u32;
             (0..p.len())
@@ -722,14 +718,54 @@ impl<const D: usize> Solver<D> {
         let rows: Vec<usize> = (0..p.len())
             .filter(|&i| unknown_of[i] != u32::MAX)
             .collect();
+        let (matrix, _) = self.assemble_ppe(
+            dt_s,
+            &rows,
+            &unknown_of,
+            |j| p.kind[j].has_pressure(),
+            |_| 0.0,
+        );
+        let rhs: Vec<f64> = rows.iter().map(|&i| source[i]).collect();
+        // Warm start from the previous pressure (part of the recorded state, so replays and
+        // resumed runs start the solver from the same guess).
+        let mut solution: Vec<f64> = rows.iter().map(|&i| p.pressure_pa[i]).collect();
+        let solve_started = Instant::now();
+        let report = self.solve_ppe_system(&matrix, &rhs, &mut solution, &rows);
+        let solve_s = solve_started.elapsed().as_secs_f64();
+        let pressure = &mut self.particles.pressure_pa;
+        pressure.iter_mut().for_each(|v| *v = 0.0);
+        for (k, &i) in rows.iter().enumerate() {
+            pressure[i] = solution[k].max(0.0);
+        }
+        (report, solve_s)
+    }
+
+    /// The PPE matrix -<lap>_i + rho kappa / dt^2 (eq. 4, Laplacian radius) on the particles
+    /// `rows` (unknown k at particle rows[k], `unknown_of` its inverse, u32::MAX for none),
+    /// over the neighbours j with `include(j)`. A neighbour that is no unknown has the known
+    /// value `known(j)`; returns per row the sum of a_ij known(j), which belongs on the right
+    /// side.
+    fn assemble_ppe(
+        &self,
+        dt_s: f64,
+        rows: &[usize],
+        unknown_of: &[u32],
+        include: impl Fn(usize) -> bool + Sync,
+        known: impl Fn(usize) -> f64 + Sync,
+    ) -> (CsrMatrix, Vec<f64>) {
+        let p = &self.particles;
+        let nb = &self.pairs.lap;
+        let refs = self.refs;
         let coef = 2.0 * D as f64 / (refs.lambda_m2 * refs.n0_lap);
-        let diag_extra = rho * c.compressibility_1_pa / (dt_s * dt_s);
-        let (matrix, _) = CsrMatrix::assemble(rows.len(), |k, columns, values| {
+        let diag_extra =
+            self.config.density_kg_m3 * self.config.compressibility_1_pa / (dt_s * dt_s);
+        CsrMatrix::assemble(rows.len(), |k, columns, values| {
             let i = rows[k];
             let mut diag = diag_extra;
+            let mut known_sum = 0.0;
             for &j in nb.of(i) {
                 let j = j as usize;
-                if !p.kind[j].has_pressure() {
+                if !include(j) {
                     continue;
                 }
                 let a = coef
@@ -744,23 +780,12 @@ impl<const D: usize> Solver<D> {
                 if unknown_of[j] != u32::MAX {
                     columns.push(unknown_of[j]);
                     values.push(-a);
+                } else {
+                    known_sum += a * known(j);
                 }
             }
-            (diag, ())
-        });
-        let rhs: Vec<f64> = rows.iter().map(|&i| source[i]).collect();
-        // Warm start from the previous pressure (part of the recorded state, so replays and
-        // resumed runs start the solver from the same guess).
-        let mut solution: Vec<f64> = rows.iter().map(|&i| p.pressure_pa[i]).collect();
-        let solve_started = Instant::now();
-        let report = self.solve_ppe_system(&matrix, &rhs, &mut solution, &rows);
-        let solve_s = solve_started.elapsed().as_secs_f64();
-        let pressure = &mut self.particles.pressure_pa;
-        pressure.iter_mut().for_each(|v| *v = 0.0);
-        for (k, &i) in rows.iter().enumerate() {
-            pressure[i] = solution[k].max(0.0);
-        }
-        (report, solve_s)
+            (diag, known_sum)
+        })
     }
 
     /// Solves the PPE `matrix` (rows at particles `rows`) by PCG from the guess in `solution`,

@@ -27,9 +27,9 @@ use super::{PARTICLES_PER_TASK, ParticleKind, PressureScheme, SolveReport, Solve
 use crate::mps::kernel::weight;
 use crate::mps::operators::{corrected_gradient, divergence, gradient_correction, moment_matrix};
 use crate::mps::particles::Vector;
-use crate::mps::pressure::CsrMatrix;
 use nalgebra::SMatrix;
 use rayon::prelude::*;
+use std::cell::OnceCell;
 use std::time::Instant;
 
 /// The corrective matrix is used where det M_i is at least this share of the full lattice's;
@@ -78,8 +78,13 @@ impl<const D: usize> Solver<D> {
                     return Vector::<D>::zeros();
                 }
                 let pi = p.pressure_pa[i];
-                let wall_base =
-                    wall_reference(p, nb, self.refs.radius_n_m, i, &p.pressure_pa, rho_g) - pi;
+                // Only particles with a wall or dummy neighbour need the reference.
+                let wall_base = OnceCell::new();
+                let wall_base = || {
+                    *wall_base.get_or_init(|| {
+                        wall_reference(p, nb, self.refs.radius_n_m, i, &p.pressure_pa, rho_g) - pi
+                    })
+                };
                 let g = corrected_gradient(
                     &p.position_m,
                     nb,
@@ -90,7 +95,7 @@ impl<const D: usize> Solver<D> {
                         if p.kind[j] == ParticleKind::Fluid {
                             p.pressure_pa[j] - pi
                         } else {
-                            wall_base + rho_g.dot(r)
+                            wall_base() + rho_g.dot(r)
                         }
                     },
                 );
@@ -151,36 +156,8 @@ impl<const D: usize> Solver<D> {
             .collect();
         // -lap(dp) over fluid neighbours: a wall's increment mirrors the particle's, so its term
         // vanishes.
-        let lap = &self.pairs.lap;
-        let coef = 2.0 * D as f64 / (refs.lambda_m2 * refs.n0_lap);
-        let diag_extra = rho * c.compressibility_1_pa / (dt_s * dt_s);
-        let (matrix, known) = CsrMatrix::assemble(rows.len(), |k, columns, values| {
-            let i = rows[k];
-            let mut diag = diag_extra;
-            let mut known = 0.0;
-            for &j in lap.of(i) {
-                let j = j as usize;
-                if !is_fluid(j) {
-                    continue;
-                }
-                let a = coef
-                    * weight(
-                        lap.displacement(&p.position_m, i, j).norm(),
-                        refs.radius_lap_m,
-                    );
-                if a == 0.0 {
-                    continue;
-                }
-                diag += a;
-                if unknown_of[j] != u32::MAX {
-                    columns.push(unknown_of[j]);
-                    values.push(-a);
-                } else {
-                    known -= a * p.pressure_pa[j];
-                }
-            }
-            (diag, known)
-        });
+        let (matrix, known) =
+            self.assemble_ppe(dt_s, &rows, &unknown_of, is_fluid, |j| -p.pressure_pa[j]);
         let rhs: Vec<f64> = source.iter().zip(&known).map(|(s, k)| s + k).collect();
         // The increment is small once the carried pressure has settled: start from zero.
         let mut solution = vec![0.0; rows.len()];
@@ -218,14 +195,19 @@ impl<const D: usize> Solver<D> {
                     return Vector::<D>::zeros();
                 }
                 let di = increment[i];
-                let wall_base = wall_reference(
-                    p,
-                    near,
-                    refs.radius_n_m,
-                    i,
-                    &increment,
-                    Vector::<D>::zeros(),
-                ) - di;
+                let wall_base = OnceCell::new();
+                let wall_base = || {
+                    *wall_base.get_or_init(|| {
+                        wall_reference(
+                            p,
+                            near,
+                            refs.radius_n_m,
+                            i,
+                            &increment,
+                            Vector::<D>::zeros(),
+                        ) - di
+                    })
+                };
                 corrected_gradient(
                     &p.position_m,
                     near,
@@ -234,7 +216,7 @@ impl<const D: usize> Solver<D> {
                     &corrections[i],
                     |j, _| match p.kind[j] {
                         ParticleKind::Fluid => increment[j] - di,
-                        _ => wall_base,
+                        _ => wall_base(),
                     },
                 ) * scale
             })
