@@ -295,11 +295,7 @@ pub fn load(path: &Path) -> Result<Plan, ManifestError> {
         experiment::load(&base_path, &sets)?;
     }
     let mut known = experiment::metric_names(&base.manifest);
-    known.extend(
-        experiment::crossings(&base.manifest)
-            .iter()
-            .map(|c| c.name.to_string()),
-    );
+    known.extend(experiment::row_metric_names(&base.manifest));
     for pair in &pairs {
         if !known.contains(&pair.metric) {
             return Err(bad(

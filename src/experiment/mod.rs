@@ -72,6 +72,11 @@ pub trait Experiment {
     fn crossings(&self, _m: &Manifest) -> Vec<Crossing> {
         Vec::new()
     }
+    /// Maxima of a metric over the diagnostics rows from a time on (e.g. the tank's speed
+    /// after settling), recorded in the summary.
+    fn extremes(&self, _m: &Manifest) -> Vec<Extreme> {
+        Vec::new()
+    }
     /// The yield stress (Pa) that a closed form of the test gives for `value` of `metric`,
     /// where it has one: the first guess of `runner calibrate`.
     fn yield_stress_guess_pa(&self, _m: &Manifest, _metric: &str, _value: f64) -> Option<f64> {
@@ -124,6 +129,7 @@ experiments! {$
     Slump(slump::Slump) = "slump",
     Rodding(rodding::Rodding) = "rodding",
     LbBox(lb_box::LbBox) = "lb_box",
+    TankAtRest(tank_at_rest::TankAtRest) = "tank_at_rest",
 }
 
 impl SceneSection for SceneSpec {
@@ -190,31 +196,73 @@ pub fn crossings(m: &Manifest) -> Vec<Crossing> {
     with_experiment!(&m.scene, e => e.crossings(m))
 }
 
+/// A summary metric `name` = the largest value of `metric` over the diagnostics rows at
+/// times >= `since_s` (sampled at `output.diagnostics_interval_s`). Left out of the summary
+/// when no row is that late.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Extreme {
+    pub name: &'static str,
+    pub metric: &'static str,
+    pub since_s: f64,
+}
+
+/// See [`Experiment::extremes`].
+pub fn extremes(m: &Manifest) -> Vec<Extreme> {
+    with_experiment!(&m.scene, e => e.extremes(m))
+}
+
+/// Names of the summary metrics that [`RowTracker`] adds for `m`: crossings and extremes.
+pub fn row_metric_names(m: &Manifest) -> Vec<String> {
+    crossings(m)
+        .iter()
+        .map(|c| c.name)
+        .chain(extremes(m).iter().map(|e| e.name))
+        .map(str::to_string)
+        .collect()
+}
+
 /// Summary metrics that builds before them did not record: a file without one is not a
 /// mismatch for `runner verify`, which says so in a note.
-pub const LATER_METRICS: &[&str] = &["t500_s", "t200_s", "t400_s"];
+pub const LATER_METRICS: &[&str] = &[
+    "t500_s",
+    "t200_s",
+    "t400_s",
+    "non_flowing_fraction",
+];
 
-/// The first crossing of each [`Crossing`], fed with the diagnostics rows in time order.
+/// The first crossing of each [`Crossing`] and the running maximum of each [`Extreme`], fed
+/// with the diagnostics rows in time order.
 #[derive(Debug, Clone, Default)]
-pub struct CrossingTracker {
+pub struct RowTracker {
     crossings: Vec<Crossing>,
+    extremes: Vec<Extreme>,
     /// The previous row's time and the value of each crossing's metric there.
     previous: Option<(f64, Vec<Option<f64>>)>,
     found: BTreeMap<String, f64>,
 }
 
-impl CrossingTracker {
+impl RowTracker {
     pub fn new(m: &Manifest) -> Self {
         Self {
             crossings: crossings(m),
+            extremes: extremes(m),
             ..Self::default()
         }
     }
     pub fn is_empty(&self) -> bool {
-        self.crossings.is_empty()
+        self.crossings.is_empty() && self.extremes.is_empty()
     }
     /// One diagnostics row: its time and a lookup of its experiment metrics.
     pub fn row(&mut self, time_s: f64, metric: impl Fn(&str) -> Option<f64>) {
+        for e in &self.extremes {
+            if time_s < e.since_s {
+                continue;
+            }
+            if let Some(v) = metric(e.metric) {
+                let best = self.found.entry(e.name.to_string()).or_insert(v);
+                *best = best.max(v);
+            }
+        }
         let values: Vec<Option<f64>> = self.crossings.iter().map(|c| metric(c.metric)).collect();
         for (k, c) in self.crossings.iter().enumerate() {
             if self.found.contains_key(c.name) || time_s < c.since_s {

@@ -3,7 +3,7 @@
 use super::RunError;
 use super::frames::{cloud, diagnostics, time_ns};
 use crate::checkpoint;
-use crate::experiment::{CrossingTracker, Manifest, experiment_metrics};
+use crate::experiment::{RowTracker, Manifest, experiment_metrics};
 use crate::mps::{ParticleKind, Solver, StepError};
 use crate::proto::foxglove::PointCloud;
 use crate::proto::mps::v1::{CheckpointHash, Diagnostics, StateCheckpoint, Summary};
@@ -94,7 +94,7 @@ pub struct LoopStart {
     /// Step of the last checkpoint already logged, if it holds the solver's current state.
     pub last_checkpoint_step: Option<u64>,
     /// The diagnostics rows already logged up to the restored time (time, experiment
-    /// metrics): they give the crossings found so far (see [`crate::experiment::Crossing`]).
+    /// metrics): they give the crossings and maxima found so far (see [`crate::experiment::RowTracker`]).
     pub logged_rows: Vec<(f64, BTreeMap<String, f64>)>,
 }
 
@@ -169,9 +169,9 @@ pub fn time_loop<const D: usize>(
         &experiment_sha256[..experiment_sha256.len().min(12)]
     );
     let stops_early = m.stop.rest_metric.is_some() || m.stop.non_flowing_fraction.is_some();
-    let mut crossings = CrossingTracker::new(m);
+    let mut tracked = RowTracker::new(m);
     for (t, metrics) in &start.logged_rows {
-        crossings.row(*t, |k| metrics.get(k).copied());
+        tracked.row(*t, |k| metrics.get(k).copied());
     }
     let mut checkpoints: Vec<CheckpointHash> = start.checkpoints;
     let mut last_checkpoint_step: Option<u64> = start.last_checkpoint_step;
@@ -196,11 +196,11 @@ pub fn time_loop<const D: usize>(
         if diag_schedule.due(t) {
             if frames {
                 let row = diagnostics(m, solver, dt_s, report.as_ref());
-                crossings.row(t, |k| row.metrics.get(k).copied());
+                tracked.row(t, |k| row.metrics.get(k).copied());
                 sink.diagnostics(time_ns(t), &row)?;
-            } else if !crossings.is_empty() {
+            } else if !tracked.is_empty() {
                 let metrics = experiment_metrics(m, &solver.particles, t);
-                crossings.row(t, |k| metrics.get(k).copied());
+                tracked.row(t, |k| metrics.get(k).copied());
             }
         }
         if cloud_schedule.due(t) && frames {
@@ -318,7 +318,12 @@ pub fn time_loop<const D: usize>(
     metrics.insert("steps".into(), solver.step as f64);
     metrics.insert("simulated_time_s".into(), solver.time_s);
     metrics.insert("stop_time_s".into(), solver.time_s);
-    for (name, t) in crossings.found() {
+    // The share of the fluid that the last step left non-flowing (a yield-stress material at
+    // rest: 1); none when no step was taken.
+    if let Some(r) = &report {
+        metrics.insert("non_flowing_fraction".into(), r.non_flowing_fraction);
+    }
+    for (name, t) in tracked.found() {
         metrics.insert(name.clone(), *t);
     }
     let summary = Summary {
