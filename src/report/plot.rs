@@ -370,12 +370,22 @@ fn colour_bar<DB: DrawingBackend>(
         let y = bottom - (t * span) as i32;
         area.draw(&PathElement::new(vec![(x1, y), (x1 + 5, y)], BLACK))?;
         area.draw(&Text::new(
-            format!("{:.4}", lo + t * (hi - lo)),
+            tick_label(lo + t * (hi - lo), lo.abs().max(hi.abs())),
             (x1 + 8, y - 6),
             ("sans-serif", 12),
         ))?;
     }
     Ok(())
+}
+
+/// A colour-bar tick: four decimals where they tell the ticks apart, else scientific (a
+/// tank at rest colours speeds of 1e-5 m/s, which four decimals printed as five zeros).
+fn tick_label(value: f64, magnitude: f64) -> String {
+    if magnitude == 0.0 || (1e-2..1e5).contains(&magnitude) {
+        format!("{value:.4}")
+    } else {
+        format!("{value:.2e}")
+    }
 }
 
 /// Legend text of category `value` of `field`.
@@ -389,5 +399,20 @@ fn category_label(field: &str, value: i64) -> String {
         ("flowing", 0) => "not flowing".into(),
         ("flowing", 1) => "flowing".into(),
         (f, v) => format!("{f} = {v}"),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::tick_label;
+
+    #[test]
+    fn colour_bar_ticks_tell_small_values_apart() {
+        assert_eq!(tick_label(0.5, 1.0), "0.5000");
+        assert_eq!(tick_label(0.0, 0.0), "0.0000");
+        // Speeds of a tank at rest: distinct labels, not 0.0000 each.
+        assert_eq!(tick_label(2.3e-5, 4.6e-5), "2.30e-5");
+        assert_eq!(tick_label(0.0, 4.6e-5), "0.00e0");
+        assert_eq!(tick_label(2.5e6, 5e6), "2.50e6");
     }
 }
