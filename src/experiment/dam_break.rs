@@ -171,5 +171,7 @@ pub fn build<const D: usize>(
         domain_max_m,
         bodies: Vec::new(),
         inlets: Vec::new(),
+        gravity_tilt_rad: 0.0,
+        periodic_x: None,
     }
 }

@@ -173,6 +173,8 @@ pub fn build<const D: usize>(
         domain_max_m,
         bodies: Vec::new(),
         inlets: Vec::new(),
+        gravity_tilt_rad: 0.0,
+        periodic_x: None,
     }
 }
 

@@ -258,6 +258,8 @@ impl Experiment for LbBox {
             domain_max_m,
             bodies: Vec::new(),
             inlets: vec![self.inlet(l0)],
+            gravity_tilt_rad: 0.0,
+            periodic_x: None,
         }
     }
 

@@ -41,6 +41,10 @@ pub struct Scene<const D: usize> {
     pub bodies: Vec<RigidBody<D>>,
     /// Inlets that add fluid during the run.
     pub inlets: Vec<Inlet<D>>,
+    /// Gravity turned from -vertical towards +x by this angle (the inclined layer); 0 else.
+    pub gravity_tilt_rad: f64,
+    /// A periodic x axis (the inclined layer); None else.
+    pub periodic_x: Option<mps::PeriodicX>,
 }
 
 /// What makes a test that test. Each method gets the whole manifest (spacing, fluid, MPS
@@ -130,6 +134,7 @@ experiments! {$
     Rodding(rodding::Rodding) = "rodding",
     LbBox(lb_box::LbBox) = "lb_box",
     TankAtRest(tank_at_rest::TankAtRest) = "tank_at_rest",
+    InclinedLayer(inclined_layer::InclinedLayer) = "inclined_layer",
 }
 
 impl SceneSection for SceneSpec {
@@ -471,6 +476,19 @@ pub fn require_3d(m: &Manifest, c: &mut Checker, kind: &str, why: &str) {
             "dimension",
             format!(
                 "scene.kind {kind} is a 3D test ({why}): dimension must be 3, got {}",
+                m.dimension
+            ),
+        );
+    }
+}
+
+/// Fails `dimension` unless the manifest is 2D: `kind` names the test, `why` says why.
+pub fn require_2d(m: &Manifest, c: &mut Checker, kind: &str, why: &str) {
+    if m.dimension != 2 {
+        c.fail(
+            "dimension",
+            format!(
+                "scene.kind {kind} is a 2D test ({why}): dimension must be 2, got {}",
                 m.dimension
             ),
         );

@@ -340,6 +340,8 @@ impl Experiment for Rodding {
             domain_max_m,
             bodies,
             inlets: Vec::new(),
+            gravity_tilt_rad: 0.0,
+            periodic_x: None,
         }
     }
 

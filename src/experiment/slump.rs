@@ -399,6 +399,8 @@ pub fn build<const D: usize>(
             .into_iter()
             .collect(),
         inlets: Vec::new(),
+        gravity_tilt_rad: 0.0,
+        periodic_x: None,
     }
 }
 

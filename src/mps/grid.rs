@@ -218,11 +218,12 @@ impl Neighbours {
     pub fn build_centres_then_listed<const D: usize>(
         positions: &[Vector<D>],
         cutoff_m: f64,
+        period_x_m: Option<f64>,
         active: impl Fn(usize) -> bool + Sync,
         centre: impl Fn(usize) -> bool + Sync,
         then: impl Fn(usize) -> bool + Sync,
     ) -> Self {
-        let grid = CellGrid::new(positions, cutoff_m, None);
+        let grid = CellGrid::new(positions, cutoff_m, period_x_m);
         let first = grid.lists(positions, &active, &centre);
         let listed = first.listed(positions.len());
         let second = grid.lists(positions, &active, &|i: usize| listed[i] && then(i));

@@ -17,5 +17,5 @@ pub use inlet::Inlet;
 pub use particles::{ParticleKind, Particles, Vector};
 pub use rheology::Rheology;
 pub use solver::{
-    PressureScheme, Solver, SolverConfig, SourceTerm, StageTimes, StepError, StepReport,
+    PeriodicX, PressureScheme, Solver, SolverConfig, SourceTerm, StageTimes, StepError, StepReport,
 };

@@ -28,6 +28,12 @@ pub struct SolverConfig<const D: usize> {
     pub viscosity_max_iterations: u32,
     /// Magnitude of gravity, acting along the last axis towards -inf.
     pub gravity_m_s2: f64,
+    /// Gravity turned by this angle from -vertical towards +x (an inclined plane as a level
+    /// floor under tilted gravity); 0 for a level scene.
+    pub gravity_tilt_rad: f64,
+    /// x is periodic: positions are kept in [min_m, min_m + period_m) and pairs take the
+    /// nearest image across the seam.
+    pub periodic_x: Option<PeriodicX>,
     pub radius_n_m: f64,
     pub radius_lap_m: f64,
     /// beta: a particle is on the free surface when n* < beta n0.
@@ -233,6 +239,21 @@ pub struct Solver<const D: usize> {
 /// bits as fresh lists every stage).
 const LIST_SKIN: f64 = 0.5;
 
+/// A periodic x axis (see [`SolverConfig::periodic_x`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PeriodicX {
+    pub min_m: f64,
+    pub period_m: f64,
+}
+
+impl PeriodicX {
+    /// The shortest period the neighbour grid accepts for a Laplacian radius (three list
+    /// cutoffs, the radius plus the skin).
+    pub fn min_period_m(radius_lap_m: f64, spacing_m: f64) -> f64 {
+        3.0 * (radius_lap_m + LIST_SKIN * spacing_m)
+    }
+}
+
 impl<const D: usize> Solver<D> {
     pub fn new(config: SolverConfig<D>, particles: Particles<D>) -> Self {
         let refs =
@@ -261,8 +282,15 @@ impl<const D: usize> Solver<D> {
     }
 
     fn gravity(&self) -> Vector<D> {
+        let c = &self.config;
         let mut g = Vector::<D>::zeros();
-        g[D - 1] = -self.config.gravity_m_s2;
+        if c.gravity_tilt_rad == 0.0 {
+            g[D - 1] = -c.gravity_m_s2;
+        } else {
+            // libm: the value enters the state, which must not depend on the platform.
+            g[0] = c.gravity_m_s2 * libm::sin(c.gravity_tilt_rad);
+            g[D - 1] = -c.gravity_m_s2 * libm::cos(c.gravity_tilt_rad);
+        }
         g
     }
 
@@ -505,6 +533,7 @@ impl<const D: usize> Solver<D> {
     /// when some particle has moved more than half the skin since the last build.
     fn rebuild_neighbours(&mut self) {
         let started = Instant::now();
+        self.wrap_periodic();
         self.refresh_lists();
         self.timing.neighbours_s += started.elapsed().as_secs_f64();
     }
@@ -530,6 +559,24 @@ impl<const D: usize> Solver<D> {
         self.timing.kernel_pairs_s += started.elapsed().as_secs_f64();
     }
 
+    /// Brings every particle that crossed the periodic seam back into the period (the lists
+    /// then see it as moved by a period and are rebuilt).
+    fn wrap_periodic(&mut self) {
+        let Some(periodic) = self.config.periodic_x else {
+            return;
+        };
+        for x in &mut self.particles.position_m {
+            let offset = x[0] - periodic.min_m;
+            if !(0.0..periodic.period_m).contains(&offset) {
+                x[0] = periodic.min_m + offset.rem_euclid(periodic.period_m);
+                // rem_euclid may round up to the period itself.
+                if x[0] >= periodic.min_m + periodic.period_m {
+                    x[0] = periodic.min_m;
+                }
+            }
+        }
+    }
+
     fn refresh_lists(&mut self) {
         let skin = LIST_SKIN * self.config.spacing_m;
         let p = &self.particles;
@@ -553,6 +600,7 @@ impl<const D: usize> Solver<D> {
         self.neighbours = Neighbours::build_centres_then_listed(
             &p.position_m,
             cutoff_m,
+            self.config.periodic_x.map(|x| x.period_m),
             active,
             |i| kind[i] == ParticleKind::Fluid,
             |i| kind[i] == ParticleKind::Wall,

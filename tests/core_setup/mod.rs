@@ -46,6 +46,8 @@ pub fn config<const D: usize>(
         viscosity_tolerance: 1e-9,
         viscosity_max_iterations: 2000,
         gravity_m_s2: 9.81,
+        gravity_tilt_rad: 0.0,
+        periodic_x: None,
         radius_n_m: 2.1 * l0,
         radius_lap_m: 3.1 * l0,
         surface_threshold: 0.97,
