@@ -58,7 +58,10 @@ fn a_layer_twice_the_critical_depth_slides_on_a_sheared_zone_at_the_closed_form_
     );
     // No drift and no growing oscillation: every row within 6 % of the mean.
     for v in &rows {
-        assert!((v / mean - 1.0).abs() < 0.06, "plug {v} m/s, mean {mean} m/s");
+        assert!(
+            (v / mean - 1.0).abs() < 0.06,
+            "plug {v} m/s, mean {mean} m/s"
+        );
     }
 }
 
@@ -91,12 +94,18 @@ fn a_layer_below_the_critical_depth_stays_rigid_and_replays_bit_for_bit() {
 #[test]
 fn a_3d_layer_or_a_short_period_is_refused_naming_the_field() {
     for (sets, field) in [
-        (vec!["dimension=3"], "dimension: scene.kind inclined_layer is a 2D test"),
+        (
+            vec!["dimension=3"],
+            "dimension: scene.kind inclined_layer is a 2D test",
+        ),
         (
             vec!["spacing_m=0.01", "scene.period_m=0.1"],
             "scene.period_m: must be >= 3 (mps.laplacian_radius + 0.5) spacing_m",
         ),
-        (vec!["scene.incline_deg=90"], "scene.incline_deg: must be in (0, 90)"),
+        (
+            vec!["scene.incline_deg=90"],
+            "scene.incline_deg: must be in (0, 90)",
+        ),
     ] {
         let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
         let error = mps_runner::experiment::load(&common::experiment("inclined_layer.yaml"), &sets)

@@ -39,7 +39,9 @@ fn the_quiet_scheme_holds_the_tank_and_its_summary_says_so() {
     // The summary's values are those of the final state, computed here independently.
     let run = read_run(&result.path).unwrap();
     let last = run.states.last().unwrap();
-    let fluid: Vec<usize> = (0..last.kind.len()).filter(|&i| last.kind[i] == 0).collect();
+    let fluid: Vec<usize> = (0..last.kind.len())
+        .filter(|&i| last.kind[i] == 0)
+        .collect();
     let mut heights: Vec<f64> = fluid.iter().map(|&i| last.position_m[2 * i + 1]).collect();
     heights.sort_by(f64::total_cmp);
     let p99 = heights[(0.99 * heights.len() as f64).ceil() as usize - 1];
@@ -83,8 +85,14 @@ fn a_bingham_layer_below_its_yield_stress_stays_rigid() {
 #[test]
 fn a_fill_above_the_tank_or_a_negative_settling_time_is_refused_naming_the_field() {
     for (set, field) in [
-        ("scene.fill_height_m=0.5", "scene.fill_height_m: must be <= scene.tank_height_m"),
-        ("scene.settling_time_s=-1", "scene.settling_time_s: must be >= 0"),
+        (
+            "scene.fill_height_m=0.5",
+            "scene.fill_height_m: must be <= scene.tank_height_m",
+        ),
+        (
+            "scene.settling_time_s=-1",
+            "scene.settling_time_s: must be >= 0",
+        ),
     ] {
         let sets = vec![set.to_string()];
         let error = mps_runner::experiment::load(&common::experiment("tank_at_rest.yaml"), &sets)

@@ -228,12 +228,7 @@ pub fn row_metric_names(m: &Manifest) -> Vec<String> {
 
 /// Summary metrics that builds before them did not record: a file without one is not a
 /// mismatch for `runner verify`, which says so in a note.
-pub const LATER_METRICS: &[&str] = &[
-    "t500_s",
-    "t200_s",
-    "t400_s",
-    "non_flowing_fraction",
-];
+pub const LATER_METRICS: &[&str] = &["t500_s", "t200_s", "t400_s", "non_flowing_fraction"];
 
 /// The first crossing of each [`Crossing`] and the running maximum of each [`Extreme`], fed
 /// with the diagnostics rows in time order.

@@ -190,7 +190,7 @@ pub fn run_info(path: &Path, size_bytes: u64, run: &RunFile) -> RunInfo {
         outcome,
         reason,
         stop_rule: summary.map(|s| s.stop.clone()),
-        pressure_scheme: super::canonical_manifest(&run).map(|m| {
+        pressure_scheme: super::canonical_manifest(run).map(|m| {
             m.get("mps")
                 .and_then(|mps| mps.get("pressure_scheme"))
                 .and_then(|v| v.as_str())

@@ -3,7 +3,7 @@
 use super::RunError;
 use super::frames::{cloud, diagnostics, time_ns};
 use crate::checkpoint;
-use crate::experiment::{RowTracker, Manifest, experiment_metrics};
+use crate::experiment::{Manifest, RowTracker, experiment_metrics};
 use crate::mps::{ParticleKind, Solver, StepError};
 use crate::proto::foxglove::PointCloud;
 use crate::proto::mps::v1::{CheckpointHash, Diagnostics, StateCheckpoint, Summary};
