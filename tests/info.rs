@@ -380,11 +380,10 @@ fn info_of_a_cut_file_names_what_is_missing() {
             .iter()
             .any(|m| m.starts_with("no `outcome` metadata"))
     );
-    assert!(
-        missing
-            .iter()
-            .any(|m| m.contains(&format!("t = {} s", last.time_s)))
-    );
+    assert!(missing.iter().any(|m| m.contains(&format!(
+        "t = {} s",
+        mps_runner::report::time_text(last.time_s)
+    ))));
     assert!(info["metrics"].as_object().unwrap().is_empty());
 
     // Its diagnostics export holds the rows read before the cut.

@@ -172,7 +172,9 @@ pub fn run_info(path: &Path, size_bytes: u64, run: &RunFile) -> RunInfo {
         missing.push(match checkpoints.list.last() {
             Some(c) => format!(
                 "the run after its last checkpoint (index {}, step {}, t = {} s): `runner resume` continues a .partial from there",
-                c.index, c.step, c.time_s
+                c.index,
+                c.step,
+                super::time_text(c.time_s)
             ),
             None => "every checkpoint: the file holds none".to_string(),
         });

@@ -39,6 +39,7 @@ use mps_runner::experiment;
 use mps_runner::manifest::sweep;
 use mps_runner::record::{Outcome, RecordError};
 use mps_runner::report;
+use mps_runner::report::time_text;
 use mps_runner::resume::{ResumeError, ResumeOptions, resume};
 use mps_runner::run::{RunError, RunOptions, run};
 use mps_runner::sweep_run::{PointStart, SweepOptions, run_sweep};
@@ -1026,15 +1027,17 @@ fn resume_command(file: &std::path::Path, threads: Option<usize>, quiet: bool) -
                 "resumed from checkpoint {} (step {}, t = {} s, {} messages copied): {} at t = {} s; wall time {:.2} s",
                 r.from_checkpoint,
                 r.from_step,
-                r.from_time_s,
+                time_text(r.from_time_s),
                 r.copied_messages,
                 r.result.outcome.as_str(),
-                r.result
-                    .summary
-                    .metrics
-                    .get("simulated_time_s")
-                    .copied()
-                    .unwrap_or(f64::NAN),
+                time_text(
+                    r.result
+                        .summary
+                        .metrics
+                        .get("simulated_time_s")
+                        .copied()
+                        .unwrap_or(f64::NAN)
+                ),
                 r.result.wall_time_s
             );
             if !r.result.summary.reason.is_empty() {
@@ -1163,7 +1166,7 @@ fn bench_command(
         particles,
         metric("fluid_particle_count"),
         steps,
-        metric("simulated_time_s"),
+        time_text(metric("simulated_time_s")),
         threads_used
     );
     println!(
@@ -1280,7 +1283,7 @@ fn run_command(args: RunArgs) -> ExitCode {
                 resolved.manifest.name,
                 result.outcome.as_str(),
                 steps,
-                metric("simulated_time_s"),
+                time_text(metric("simulated_time_s")),
                 particles,
                 result.wall_time_s,
                 steps * particles / result.wall_time_s.max(1e-9)
