@@ -15,7 +15,9 @@
 use serde_json::Value;
 use sha2::{Digest, Sha256};
 
-use super::types::{Manifest, PpePreconditioner, PressureSchemeName, SceneSection};
+use super::types::{
+    IncrementProjectionName, Manifest, PpePreconditioner, PressureSchemeName, SceneSection,
+};
 
 /// Replace every `-0.0` in `value` by `0.0`.
 pub fn normalise_negative_zero(value: &mut Value) {
@@ -45,6 +47,14 @@ pub fn canonical_text<S: SceneSection>(manifest: &Manifest<S>) -> String {
         // The standard scheme does not read the incremental scheme's relaxation.
         mps.remove("pressure_scheme");
         mps.remove("compression_relaxation");
+    }
+    if (manifest.mps.pressure_scheme == PressureSchemeName::Standard
+        || manifest.mps.increment_projection == IncrementProjectionName::Approximate)
+        && let Some(mps) = value.get_mut("mps").and_then(Value::as_object_mut)
+    {
+        // Only the energy-stable projection reads these.
+        mps.remove("increment_projection");
+        mps.remove("projection_regularisation");
     }
     for (section, key) in [
         ("mps", "wall_collision_distance"),

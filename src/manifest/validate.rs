@@ -171,6 +171,11 @@ pub fn check<S: SceneSection>(m: &Manifest<S>) -> Vec<Issue> {
         between(0.0, true, 1.0, true),
     );
     c.real(
+        "mps.projection_regularisation",
+        p.projection_regularisation,
+        between(0.0, true, 10.0, true),
+    );
+    c.real(
         "mps.compressibility_1_pa",
         p.compressibility_1_pa,
         NON_NEGATIVE,

@@ -17,5 +17,6 @@ pub use inlet::Inlet;
 pub use particles::{ParticleKind, Particles, Vector};
 pub use rheology::Rheology;
 pub use solver::{
-    PeriodicX, PressureScheme, Solver, SolverConfig, SourceTerm, StageTimes, StepError, StepReport,
+    IncrementProjection, PeriodicX, PressureScheme, Solver, SolverConfig, SourceTerm, StageTimes,
+    StepError, StepReport,
 };

@@ -15,6 +15,9 @@ use rayon::prelude::*;
 use std::time::Instant;
 
 mod incremental;
+mod projection;
+
+pub use projection::IncrementProjection;
 
 /// Physical and numerical parameters of the solver, all in SI units.
 #[derive(Debug, Clone, PartialEq)]
@@ -46,6 +49,8 @@ pub struct SolverConfig<const D: usize> {
     /// gamma_c of the incremental scheme: relaxation of its compression term
     /// gamma_c rho/dt^2 max(n*_i - n0, 0)/n0 (volume kept where the velocity source drifts).
     pub compression_relaxation: f64,
+    /// How the incremental scheme projects u* (unused by the standard scheme).
+    pub increment_projection: IncrementProjection,
     /// Aggregation multigrid instead of Jacobi as the PPE preconditioner.
     pub multigrid_ppe: bool,
     pub compressibility_1_pa: f64,

@@ -56,6 +56,7 @@ pub fn config<const D: usize>(
         multigrid_ppe: false,
         pressure_scheme: mps_runner::mps::PressureScheme::Standard,
         compression_relaxation: 0.01,
+        increment_projection: mps_runner::mps::IncrementProjection::Approximate,
         compressibility_1_pa: 0.45e-9,
         collision_distance_m: 0.5 * l0,
         wall_collision_distance_m: wall_collision_distance_m(D, 0.5 * l0, l0),

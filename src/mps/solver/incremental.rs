@@ -40,7 +40,7 @@ const MIN_DET_RATIO: f64 = 0.05;
 impl<const D: usize> Solver<D> {
     /// Corrective matrix of every fluid particle at the current positions (identity-scaled
     /// fallback elsewhere; non-fluid entries are unused).
-    fn gradient_corrections(&self) -> Vec<SMatrix<f64, D, D>> {
+    pub(super) fn gradient_corrections(&self) -> Vec<SMatrix<f64, D, D>> {
         let p = &self.particles;
         let nb = &self.pairs.near;
         let refs = self.refs;
@@ -69,6 +69,11 @@ impl<const D: usize> Solver<D> {
         let nb = &self.pairs.near;
         let rho = self.config.density_kg_m3;
         let rho_g = self.gravity() * rho;
+        // The energy-stable projection keeps each wall's and dummy's own pressure.
+        let walls_own = matches!(
+            self.config.increment_projection,
+            super::IncrementProjection::EnergyStable { .. }
+        );
         (0..p.len())
             .into_par_iter()
             .with_min_len(PARTICLES_PER_TASK)
@@ -92,7 +97,7 @@ impl<const D: usize> Solver<D> {
                     self.refs.radius_n_m,
                     &corrections[i],
                     |j, r| {
-                        if p.kind[j] == ParticleKind::Fluid {
+                        if p.kind[j] == ParticleKind::Fluid || walls_own {
                             p.pressure_pa[j] - pi
                         } else {
                             wall_base() + rho_g.dot(r)
@@ -111,6 +116,11 @@ impl<const D: usize> Solver<D> {
         &mut self,
         dt_s: f64,
     ) -> Result<(SolveReport, usize), StepError> {
+        if let super::IncrementProjection::EnergyStable { regularisation } =
+            self.config.increment_projection
+        {
+            return self.energy_stable_projection(dt_s, regularisation);
+        }
         let pressure_started = Instant::now();
         let c = &self.config;
         let refs = self.refs;
@@ -238,7 +248,7 @@ impl<const D: usize> Solver<D> {
 /// walls from echoing i's own deviation (an odd-even pressure mode, which the consistent
 /// gradient does not see in the interior, would otherwise push on the wall rows). Falls back to
 /// v_i without fluid neighbours.
-fn wall_reference<const D: usize>(
+pub(super) fn wall_reference<const D: usize>(
     p: &crate::mps::particles::Particles<D>,
     nb: &crate::mps::grid::Neighbours,
     radius_m: f64,
