@@ -65,12 +65,18 @@ fn best_shift(
 /// Runs the 0.25 m x 0.5 m water column at `spacing_m` up to `end_s` (2 threads) and returns
 /// gravity and its front (t [s], front_position_m [m]) at every diagnostics row (every 5 ms).
 fn front_history(spacing_m: f64, end_s: f64) -> (f64, Vec<(f64, f64)>) {
+    front_history_with(spacing_m, end_s, &[])
+}
+
+/// [`front_history`] with more `--set`s.
+fn front_history_with(spacing_m: f64, end_s: f64, more: &[&str]) -> (f64, Vec<(f64, f64)>) {
     let sets = [
         format!("spacing_m={spacing_m}"),
         format!("time.end_s={end_s}"),
         "output.diagnostics_interval_s=0.005".to_string(),
     ];
-    let sets: Vec<&str> = sets.iter().map(|s| s.as_str()).collect();
+    let mut sets: Vec<&str> = sets.iter().map(|s| s.as_str()).collect();
+    sets.extend_from_slice(more);
     let resolved = common::resolve("dam_break_2d.yaml", &sets);
     let m = &resolved.manifest;
     assert!(
@@ -115,6 +121,28 @@ fn front_at_fixed_time_matches_open_mps_codes() {
         (low..=high).contains(&at),
         "front {at} m at t = 0.2 s outside {low}-{high} m"
     );
+}
+
+/// The incremental scheme's energy-stable projection carries the 10 mm column through its
+/// violent phase (the approximate projection blows up at the toe at 0.06 s: README, "Holding
+/// still"): the run completes and the surge reaches the far wall (1.0 m) by t = 0.4 s, as the
+/// standard scheme's does (0.993 m measured there).
+#[test]
+fn energy_stable_projection_survives_the_dam_break() {
+    let incremental = [
+        "mps.pressure_scheme=incremental",
+        "mps.increment_projection=energy_stable",
+    ];
+    let (_, front) = front_history_with(0.01, 0.4, &incremental);
+    let at = |t: f64| interpolate(&front, t).expect("a diagnostics row");
+    // Measured 0.615 m at 0.2 s (the standard scheme 0.584 m; the open codes 0.587-0.602 m at
+    // 5 mm): the excess is the scheme's open accuracy question, not asserted here.
+    eprintln!("energy-stable front: {:.4} m at 0.2 s, {:.4} m at 0.4 s", at(0.2), at(0.4));
+    assert!(at(0.4) > 0.95, "front {} m at t = 0.4 s", at(0.4));
+    // A front ahead of the dry-bed shallow-water limit, a + 2 sqrt(g 2a) t (Ritter), would mean
+    // the scheme makes energy.
+    let ritter = A_M + 2.0 * (9.81 * 2.0 * A_M).sqrt() * 0.2;
+    assert!(at(0.2) < ritter, "front {} m at 0.2 s beyond {ritter} m", at(0.2));
 }
 
 #[test]
