@@ -123,26 +123,30 @@ fn front_at_fixed_time_matches_open_mps_codes() {
     );
 }
 
-/// The incremental scheme's energy-stable projection carries the 10 mm column through its
-/// violent phase (the approximate projection blows up at the toe at 0.06 s: README, "Holding
-/// still"): the run completes and the surge reaches the far wall (1.0 m) by t = 0.4 s, as the
-/// standard scheme's does (0.993 m measured there).
+/// The incremental (quiet) scheme with its two stabilisers carries the column through the
+/// violent phase, where without them it blows up at the toe at 0.06 s (README, "Holding
+/// still"), and puts the front where the open codes do.
 #[test]
-fn energy_stable_projection_survives_the_dam_break() {
-    let incremental = [
+fn stabilised_incremental_scheme_matches_open_mps_codes() {
+    let spacing_m = 0.01;
+    let quiet = [
         "mps.pressure_scheme=incremental",
-        "mps.increment_projection=energy_stable",
+        "mps.pair_stabilisation=0.9",
+        "mps.wall_support=0.95",
     ];
-    let (_, front) = front_history_with(0.01, 0.4, &incremental);
-    let at = |t: f64| interpolate(&front, t).expect("a diagnostics row");
-    // Measured 0.615 m at 0.2 s (the standard scheme 0.584 m; the open codes 0.587-0.602 m at
-    // 5 mm): the excess is the scheme's open accuracy question, not asserted here.
-    eprintln!("energy-stable front: {:.4} m at 0.2 s, {:.4} m at 0.4 s", at(0.2), at(0.4));
-    assert!(at(0.4) > 0.95, "front {} m at t = 0.4 s", at(0.4));
-    // A front ahead of the dry-bed shallow-water limit, a + 2 sqrt(g 2a) t (Ritter), would mean
-    // the scheme makes energy.
-    let ritter = A_M + 2.0 * (9.81 * 2.0 * A_M).sqrt() * 0.2;
-    assert!(at(0.2) < ritter, "front {} m at 0.2 s beyond {ritter} m", at(0.2));
+    // To 0.4 s: the surge has reached the far wall and run up it.
+    let (_, front) = front_history_with(spacing_m, 0.4, &quiet);
+    let at = interpolate(&front, 0.2).expect("a diagnostics row at or after t = 0.2 s");
+    // The same band as front_at_fixed_time_matches_open_mps_codes. Measured 0.590 m (10 mm)
+    // and 0.5977 m (5 mm); the standard scheme 0.5844 m at 10 mm.
+    let (low, high) = (0.587 - 0.5 * spacing_m, 0.602 + 0.5 * spacing_m);
+    eprintln!("incremental front at t = 0.2 s: {at:.4} m (allowed {low:.4}-{high:.4})");
+    assert!(
+        (low..=high).contains(&at),
+        "front {at} m at t = 0.2 s outside {low}-{high} m"
+    );
+    let last = front.last().expect("rows").1;
+    assert!(last > 0.95, "front {last} m at t = 0.4 s: the surge did not reach the far wall");
 }
 
 #[test]

@@ -6,7 +6,8 @@
 //! round-trip form, `-0.0` written as `0.0`, integers as integers. Settings added after the
 //! format was first used are left out while they are at their original behaviour
 //! (`mps.ppe_preconditioner: jacobi`, `mps.pressure_scheme: standard` with
-//! `mps.compression_relaxation`, `stop.rest_*` without `stop.rest_metric`, null
+//! `mps.compression_relaxation`, `mps.pair_stabilisation` and `mps.wall_support` at 0 (and
+//! under the standard scheme), `stop.rest_*` without `stop.rest_metric`, null
 //! `mps.wall_collision_*`, `time.dt_min_s` and `stop.max_ghost_particles`, an empty
 //! `boundaries` section), so every experiment keeps the hash it had before they existed and
 //! files written then still verify. JSON is YAML, so the canonical text loads back through
@@ -15,9 +16,7 @@
 use serde_json::Value;
 use sha2::{Digest, Sha256};
 
-use super::types::{
-    IncrementProjectionName, Manifest, PpePreconditioner, PressureSchemeName, SceneSection,
-};
+use super::types::{Manifest, PpePreconditioner, PressureSchemeName, SceneSection};
 
 /// Replace every `-0.0` in `value` by `0.0`.
 pub fn normalise_negative_zero(value: &mut Value) {
@@ -48,13 +47,17 @@ pub fn canonical_text<S: SceneSection>(manifest: &Manifest<S>) -> String {
         mps.remove("pressure_scheme");
         mps.remove("compression_relaxation");
     }
-    if (manifest.mps.pressure_scheme == PressureSchemeName::Standard
-        || manifest.mps.increment_projection == IncrementProjectionName::Approximate)
-        && let Some(mps) = value.get_mut("mps").and_then(Value::as_object_mut)
-    {
-        // Only the energy-stable projection reads these.
-        mps.remove("increment_projection");
-        mps.remove("projection_regularisation");
+    if let Some(mps) = value.get_mut("mps").and_then(Value::as_object_mut) {
+        // Off (0) is the behaviour before the fields existed; the standard scheme reads
+        // neither.
+        for (key, v) in [
+            ("pair_stabilisation", manifest.mps.pair_stabilisation),
+            ("wall_support", manifest.mps.wall_support),
+        ] {
+            if v == 0.0 || manifest.mps.pressure_scheme == PressureSchemeName::Standard {
+                mps.remove(key);
+            }
+        }
     }
     for (section, key) in [
         ("mps", "wall_collision_distance"),

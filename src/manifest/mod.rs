@@ -29,8 +29,8 @@ use std::path::Path;
 
 pub use error::{ManifestError, Result};
 pub use types::{
-    Fluid, IncrementProjectionName, Manifest, Mps, Output, PpePreconditioner, PpeSource,
-    PressureSchemeName, SceneSection, Stop, Time,
+    Fluid, Manifest, Mps, Output, PpePreconditioner, PpeSource, PressureSchemeName, SceneSection,
+    Stop, Time,
 };
 
 use locate::{Pos, SourceMap};

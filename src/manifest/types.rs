@@ -208,17 +208,19 @@ pub struct Mps {
     /// gamma_c rho/dt^2 max(n* - n0, 0)/n0. In [0, 1]. Unused by `standard`.
     #[serde(default = "default_compression_relaxation")]
     pub compression_relaxation: f64,
-    /// How the incremental scheme projects the predicted velocity: `approximate` (the MPS
-    /// Laplacian as the matrix, the corrected gradient for the correction; files written
-    /// before the choice existed used it) or `energy_stable` (the matrix G^T G + eps L with G
-    /// the divergence's adjoint: the correction never adds kinetic energy). Unused by
-    /// `standard`.
+    /// Incremental scheme, units of spacing: after the correction, fluid pairs closer than
+    /// this are pushed back to it within the step (dynamic stabilisation, Tsuruta, Khayyer &
+    /// Gotoh 2013); a fluid-wall pair moves the fluid particle alone. 0 = off. In [0, 1).
+    /// Idle on a lattice. Unused by `standard`.
     #[serde(default)]
-    pub increment_projection: IncrementProjectionName,
-    /// eps of the `energy_stable` projection: the share of the MPS Laplacian added to G^T G
-    /// (damps the odd-even pressure modes G does not see). In [0, 10].
-    #[serde(default = "default_projection_regularisation")]
-    pub projection_regularisation: f64,
+    pub pair_stabilisation: f64,
+    /// Incremental scheme, units of spacing: a wall particle with a fluid particle closer than
+    /// this becomes an unknown of the increment's PPE (its own velocity divergence as the
+    /// source), and that fluid particle's carried gradient sees its walls no lower than
+    /// itself, so walls push back on fluid driven into them. 0 = off. In [0, 1). Idle at rest
+    /// (fluid sits a spacing from the walls). Unused by `standard`.
+    #[serde(default)]
+    pub wall_support: f64,
     /// Artificial compressibility on the PPE diagonal, in 1/Pa.
     #[serde(default = "default_compressibility_1_pa")]
     pub compressibility_1_pa: f64,
@@ -274,8 +276,8 @@ impl Default for Mps {
             source_term: default_source_term(),
             pressure_scheme: PressureSchemeName::default(),
             compression_relaxation: default_compression_relaxation(),
-            increment_projection: IncrementProjectionName::default(),
-            projection_regularisation: default_projection_regularisation(),
+            pair_stabilisation: 0.0,
+            wall_support: 0.0,
             ppe_preconditioner: PpePreconditioner::default(),
             compressibility_1_pa: default_compressibility_1_pa(),
             collision_distance: default_collision_distance(),
@@ -333,29 +335,6 @@ impl PressureSchemeName {
 
 fn default_compression_relaxation() -> f64 {
     0.01
-}
-
-/// Increment projection choice (see [`Mps::increment_projection`]).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum IncrementProjectionName {
-    #[default]
-    Approximate,
-    EnergyStable,
-}
-
-impl IncrementProjectionName {
-    /// The manifest's spelling.
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::Approximate => "approximate",
-            Self::EnergyStable => "energy_stable",
-        }
-    }
-}
-
-fn default_projection_regularisation() -> f64 {
-    0.1
 }
 
 /// PPE preconditioner choice (see [`Mps::ppe_preconditioner`]).

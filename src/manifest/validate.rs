@@ -171,14 +171,19 @@ pub fn check<S: SceneSection>(m: &Manifest<S>) -> Vec<Issue> {
         between(0.0, true, 1.0, true),
     );
     c.real(
-        "mps.projection_regularisation",
-        p.projection_regularisation,
-        between(0.0, true, 10.0, true),
-    );
-    c.real(
         "mps.compressibility_1_pa",
         p.compressibility_1_pa,
         NON_NEGATIVE,
+    );
+    c.real(
+        "mps.pair_stabilisation",
+        p.pair_stabilisation,
+        between(0.0, true, 1.0, false),
+    );
+    c.real(
+        "mps.wall_support",
+        p.wall_support,
+        between(0.0, true, 1.0, false),
     );
     c.real(
         "mps.collision_distance",

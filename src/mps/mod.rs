@@ -17,6 +17,5 @@ pub use inlet::Inlet;
 pub use particles::{ParticleKind, Particles, Vector};
 pub use rheology::Rheology;
 pub use solver::{
-    IncrementProjection, PeriodicX, PressureScheme, Solver, SolverConfig, SourceTerm, StageTimes,
-    StepError, StepReport,
+    PeriodicX, PressureScheme, Solver, SolverConfig, SourceTerm, StageTimes, StepError, StepReport,
 };

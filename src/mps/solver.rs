@@ -15,9 +15,6 @@ use rayon::prelude::*;
 use std::time::Instant;
 
 mod incremental;
-mod projection;
-
-pub use projection::IncrementProjection;
 
 /// Physical and numerical parameters of the solver, all in SI units.
 #[derive(Debug, Clone, PartialEq)]
@@ -49,8 +46,13 @@ pub struct SolverConfig<const D: usize> {
     /// gamma_c of the incremental scheme: relaxation of its compression term
     /// gamma_c rho/dt^2 max(n*_i - n0, 0)/n0 (volume kept where the velocity source drifts).
     pub compression_relaxation: f64,
-    /// How the incremental scheme projects u* (unused by the standard scheme).
-    pub increment_projection: IncrementProjection,
+    /// Incremental scheme: fluid pairs closer than this (m) are pushed back to it within the
+    /// step (dynamic stabilisation; 0 = off). Idle while every pair is this far apart.
+    pub pair_stabilisation_m: f64,
+    /// Incremental scheme: a wall particle with a fluid particle closer than this (m) takes
+    /// part in the increment's PPE, and that fluid particle's carried gradient sees its walls
+    /// no lower than itself (0 = off). Idle at rest, where fluid sits a spacing from walls.
+    pub wall_support_m: f64,
     /// Aggregation multigrid instead of Jacobi as the PPE preconditioner.
     pub multigrid_ppe: bool,
     pub compressibility_1_pa: f64,
@@ -433,6 +435,9 @@ impl<const D: usize> Solver<D> {
         } else {
             self.standard_projection(dt_s, start_density.as_deref())?
         };
+        if incremental && self.config.pair_stabilisation_m > 0.0 {
+            self.stabilise_pairs(dt_s, self.config.pair_stabilisation_m);
+        }
         if self.config.wall_collision_second_pass {
             // The correction can push a free-surface particle into a gap of the wall lattice
             // (see `wall_collision_distance_m`): fluid-wall pairs collide once more.
@@ -645,6 +650,47 @@ impl<const D: usize> Solver<D> {
     /// other exchange momentum along their line of centres with restitution e (equal masses;
     /// walls are immovable). Jacobi-style: all impulses from the pre-collision velocities.
     /// `walls_only`: fluid-wall pairs only.
+    /// Dynamic stabilisation (Tsuruta, Khayyer & Gotoh 2013, simplified): each fluid particle
+    /// closer than `distance_m` to another gets the velocity that moves it back by its share
+    /// of the shortfall within this step, along the pair's axis: half against fluid (equal and
+    /// opposite, so momentum is kept), all against a wall or dummy. Idle when every pair is at
+    /// least `distance_m` apart (a lattice at rest).
+    fn stabilise_pairs(&mut self, dt_s: f64, distance_m: f64) {
+        let p = &self.particles;
+        let nb = &self.pairs.near;
+        let dv: Vec<Vector<D>> = (0..p.len())
+            .into_par_iter()
+            .with_min_len(PARTICLES_PER_TASK)
+            .with_max_len(PARTICLES_PER_TASK)
+            .map(|i| {
+                let mut dv = Vector::<D>::zeros();
+                if p.kind[i] != ParticleKind::Fluid {
+                    return dv;
+                }
+                for &j in nb.of(i) {
+                    let j = j as usize;
+                    let r = nb.displacement(&p.position_m, i, j);
+                    let d = r.norm();
+                    if d >= distance_m || d == 0.0 {
+                        continue;
+                    }
+                    let share = if p.kind[j] == ParticleKind::Fluid {
+                        0.5
+                    } else {
+                        1.0
+                    };
+                    dv -= r * (share * (distance_m - d) / (d * dt_s));
+                }
+                dv
+            })
+            .collect();
+        let p = &mut self.particles;
+        per_particle(&mut p.velocity_m_s, &mut p.position_m, |i, v, x| {
+            *v += dv[i];
+            *x += dv[i] * dt_s;
+        });
+    }
+
     fn collide(&mut self, dt_s: f64, walls_only: bool) {
         let c = &self.config;
         if c.collision_distance_m <= 0.0 {

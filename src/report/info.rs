@@ -36,9 +36,8 @@ pub struct RunInfo {
     /// without a `/summary` message.
     pub stop_rule: Option<String>,
     /// `mps.pressure_scheme` of the stored manifest (`standard` when the canonical form leaves
-    /// it out, as it does for that default), followed by `, mps.increment_projection NAME
-    /// (regularisation EPS)` when the file used a projection other than the first one; `None`
-    /// without a readable manifest.
+    /// it out, as it does for that default), followed by `, mps.pair_stabilisation X` and
+    /// `, mps.wall_support Y` when the run had them on; `None` without a readable manifest.
     pub pressure_scheme: Option<String>,
     /// The `build` metadata: crate_version, git_commit, rustc, target, profile.
     pub build: BTreeMap<String, String>,
@@ -196,18 +195,18 @@ pub fn run_info(path: &Path, size_bytes: u64, run: &RunFile) -> RunInfo {
         stop_rule: summary.map(|s| s.stop.clone()),
         pressure_scheme: super::canonical_manifest(run).map(|m| {
             let mps = m.get("mps");
-            let field = |key: &str| mps.and_then(|mps| mps.get(key));
-            let scheme = field("pressure_scheme")
+            let mut text = mps
+                .and_then(|mps| mps.get("pressure_scheme"))
                 .and_then(|v| v.as_str())
-                .unwrap_or("standard");
-            // The projection is in the canonical form only when it is not the first one.
-            match field("increment_projection").and_then(|v| v.as_str()) {
-                Some(projection) => format!(
-                    "{scheme}, mps.increment_projection {projection} (regularisation {})",
-                    field("projection_regularisation").map_or("-".to_string(), |v| v.to_string())
-                ),
-                None => scheme.to_string(),
+                .unwrap_or("standard")
+                .to_string();
+            // The stabilisers are in the canonical form only when on.
+            for key in ["pair_stabilisation", "wall_support"] {
+                if let Some(v) = mps.and_then(|mps| mps.get(key)) {
+                    text.push_str(&format!(", mps.{key} {v}"));
+                }
             }
+            text
         }),
         build: run.metadata.get(META_BUILD).cloned().unwrap_or_default(),
         threads: meta(META_RUN, "threads"),

@@ -1,9 +1,7 @@
 //! The solver's configuration from a manifest and its test's scene.
 use crate::experiment::{Manifest, Scene};
-use crate::manifest::{
-    Fluid, IncrementProjectionName, PpePreconditioner, PpeSource, PressureSchemeName,
-};
-use crate::mps::{IncrementProjection, PressureScheme, Rheology, SolverConfig, SourceTerm};
+use crate::manifest::{Fluid, PpePreconditioner, PpeSource, PressureSchemeName};
+use crate::mps::{PressureScheme, Rheology, SolverConfig, SourceTerm};
 
 /// The rheology a manifest's fluid section describes, and whether eq. 8's term is on.
 pub fn rheology(fluid: &Fluid) -> (Rheology, bool) {
@@ -68,12 +66,8 @@ pub fn solver_config<const D: usize>(m: &Manifest, scene: &Scene<D>) -> SolverCo
             PressureSchemeName::Incremental => PressureScheme::Incremental,
         },
         compression_relaxation: m.mps.compression_relaxation,
-        increment_projection: match m.mps.increment_projection {
-            IncrementProjectionName::Approximate => IncrementProjection::Approximate,
-            IncrementProjectionName::EnergyStable => IncrementProjection::EnergyStable {
-                regularisation: m.mps.projection_regularisation,
-            },
-        },
+        pair_stabilisation_m: m.mps.pair_stabilisation * l0,
+        wall_support_m: m.mps.wall_support * l0,
         compressibility_1_pa: m.mps.compressibility_1_pa,
         collision_distance_m: m.mps.collision_distance * l0,
         wall_collision_distance_m: match m.mps.wall_collision_distance {

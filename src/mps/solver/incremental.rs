@@ -40,7 +40,7 @@ const MIN_DET_RATIO: f64 = 0.05;
 impl<const D: usize> Solver<D> {
     /// Corrective matrix of every fluid particle at the current positions (identity-scaled
     /// fallback elsewhere; non-fluid entries are unused).
-    pub(super) fn gradient_corrections(&self) -> Vec<SMatrix<f64, D, D>> {
+    fn gradient_corrections(&self) -> Vec<SMatrix<f64, D, D>> {
         let p = &self.particles;
         let nb = &self.pairs.near;
         let refs = self.refs;
@@ -69,11 +69,6 @@ impl<const D: usize> Solver<D> {
         let nb = &self.pairs.near;
         let rho = self.config.density_kg_m3;
         let rho_g = self.gravity() * rho;
-        // The energy-stable projection keeps each wall's and dummy's own pressure.
-        let walls_own = matches!(
-            self.config.increment_projection,
-            super::IncrementProjection::EnergyStable { .. }
-        );
         (0..p.len())
             .into_par_iter()
             .with_min_len(PARTICLES_PER_TASK)
@@ -87,7 +82,16 @@ impl<const D: usize> Solver<D> {
                 let wall_base = OnceCell::new();
                 let wall_base = || {
                     *wall_base.get_or_init(|| {
-                        wall_reference(p, nb, self.refs.radius_n_m, i, &p.pressure_pa, rho_g) - pi
+                        let base =
+                            wall_reference(p, nb, self.refs.radius_n_m, i, &p.pressure_pa, rho_g)
+                                - pi;
+                        // Driven into a wall, i must not see it lower than itself: the mean of
+                        // its neighbours would pull a particle with a pressure peak into it.
+                        if self.pressed_against_wall(i) {
+                            base.max(0.0)
+                        } else {
+                            base
+                        }
                     })
                 };
                 let g = corrected_gradient(
@@ -97,7 +101,7 @@ impl<const D: usize> Solver<D> {
                     self.refs.radius_n_m,
                     &corrections[i],
                     |j, r| {
-                        if p.kind[j] == ParticleKind::Fluid || walls_own {
+                        if p.kind[j] == ParticleKind::Fluid {
                             p.pressure_pa[j] - pi
                         } else {
                             wall_base() + rho_g.dot(r)
@@ -116,11 +120,6 @@ impl<const D: usize> Solver<D> {
         &mut self,
         dt_s: f64,
     ) -> Result<(SolveReport, usize), StepError> {
-        if let super::IncrementProjection::EnergyStable { regularisation } =
-            self.config.increment_projection
-        {
-            return self.energy_stable_projection(dt_s, regularisation);
-        }
         let pressure_started = Instant::now();
         let c = &self.config;
         let refs = self.refs;
@@ -138,10 +137,14 @@ impl<const D: usize> Solver<D> {
             .map(|i| is_fluid(i) && number_density[i] < threshold)
             .collect();
         let surface_count = surface.iter().filter(|&&s| s).count();
+        // Wall support: walls that a fluid particle has come closer to than
+        // `wall_support_m` are unknowns too (their own divergence as the source), so the
+        // increment can push back on fluid driven into them.
+        let support = self.supporting_walls();
         let mut unknown_of = vec![u32::MAX; p.len()];
         let mut rows = Vec::new();
         for i in 0..p.len() {
-            if is_fluid(i) && !surface[i] {
+            if (is_fluid(i) && !surface[i]) || support[i] {
                 unknown_of[i] = rows.len() as u32;
                 rows.push(i);
             }
@@ -160,14 +163,22 @@ impl<const D: usize> Solver<D> {
                 let div = divergence(&p.position_m, near, i, refs.radius_n_m, refs.n0, |j| {
                     p.velocity_m_s[j] - ui
                 });
+                if !is_fluid(i) {
+                    return -rho / dt_s * div;
+                }
                 let compression = (number_density[i] - refs.n0).max(0.0) / refs.n0;
                 -rho / dt_s * div + compression_scale * compression
             })
             .collect();
         // -lap(dp) over fluid neighbours: a wall's increment mirrors the particle's, so its term
         // vanishes.
-        let (matrix, known) =
-            self.assemble_ppe(dt_s, &rows, &unknown_of, is_fluid, |j| -p.pressure_pa[j]);
+        let (matrix, known) = self.assemble_ppe(
+            dt_s,
+            &rows,
+            &unknown_of,
+            |j| is_fluid(j) || support[j],
+            |j| -p.pressure_pa[j],
+        );
         let rhs: Vec<f64> = source.iter().zip(&known).map(|(s, k)| s + k).collect();
         // The increment is small once the carried pressure has settled: start from zero.
         let mut solution = vec![0.0; rows.len()];
@@ -180,9 +191,12 @@ impl<const D: usize> Solver<D> {
 
         // New carried pressure and the increment actually applied (after the clip at 0).
         let p = &self.particles;
+        // Walls carry no pressure of their own (the carried gradient mirrors the fluid's); a
+        // supporting wall's increment acts in this correction only.
         let new_pressure: Vec<f64> = (0..p.len())
             .map(|i| match unknown_of[i] {
                 u32::MAX => 0.0,
+                _ if !is_fluid(i) => 0.0,
                 k => (p.pressure_pa[i] + solution[k as usize]).max(0.0),
             })
             .collect();
@@ -190,6 +204,8 @@ impl<const D: usize> Solver<D> {
             .map(|i| {
                 if is_fluid(i) {
                     new_pressure[i] - p.pressure_pa[i]
+                } else if support[i] {
+                    solution[unknown_of[i] as usize]
                 } else {
                     0.0
                 }
@@ -226,6 +242,7 @@ impl<const D: usize> Solver<D> {
                     &corrections[i],
                     |j, _| match p.kind[j] {
                         ParticleKind::Fluid => increment[j] - di,
+                        _ if support[j] => increment[j] - di,
                         _ => wall_base(),
                     },
                 ) * scale
@@ -248,7 +265,7 @@ impl<const D: usize> Solver<D> {
 /// walls from echoing i's own deviation (an odd-even pressure mode, which the consistent
 /// gradient does not see in the interior, would otherwise push on the wall rows). Falls back to
 /// v_i without fluid neighbours.
-pub(super) fn wall_reference<const D: usize>(
+fn wall_reference<const D: usize>(
     p: &crate::mps::particles::Particles<D>,
     nb: &crate::mps::grid::Neighbours,
     radius_m: f64,
@@ -274,5 +291,41 @@ pub(super) fn wall_reference<const D: usize>(
         sum / weights
     } else {
         values[i]
+    }
+}
+
+impl<const D: usize> Solver<D> {
+    /// Whether fluid particle i has a wall particle closer than `wall_support_m`.
+    fn pressed_against_wall(&self, i: usize) -> bool {
+        let reach = self.config.wall_support_m;
+        let p = &self.particles;
+        let nb = &self.pairs.near;
+        reach > 0.0
+            && nb.of(i).iter().any(|&j| {
+                p.kind[j as usize] == ParticleKind::Wall
+                    && nb.displacement(&p.position_m, i, j as usize).norm() < reach
+            })
+    }
+
+    /// The wall particles (not dummies) with a fluid particle closer than `wall_support_m`:
+    /// the supporting walls of this step's increment (all false when wall support is off).
+    fn supporting_walls(&self) -> Vec<bool> {
+        let reach = self.config.wall_support_m;
+        let p = &self.particles;
+        let nb = &self.pairs.near;
+        (0..p.len())
+            .into_par_iter()
+            .with_min_len(PARTICLES_PER_TASK)
+            .with_max_len(PARTICLES_PER_TASK)
+            .map(|i| {
+                reach > 0.0
+                    && p.kind[i] == ParticleKind::Wall
+                    && !self.pairs.lap.of(i).is_empty()
+                    && nb.of(i).iter().any(|&j| {
+                        p.kind[j as usize] == ParticleKind::Fluid
+                            && nb.displacement(&p.position_m, i, j as usize).norm() < reach
+                    })
+            })
+            .collect()
     }
 }
