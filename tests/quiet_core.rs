@@ -178,6 +178,14 @@ fn still_tank_stays_still_in_3d() {
 fn stabilisers_are_idle_at_rest() {
     let plain = still_tank::<2>(PressureScheme::Incremental, [30, 14], 10, 1.0);
     let stabilised = still_tank_with::<2>(PressureScheme::Incremental, [30, 14], 10, 1.0, 0.95);
-    assert_eq!(plain.0.to_bits(), stabilised.0.to_bits(), "max speed {plain:?} {stabilised:?}");
-    assert_eq!(plain.1.to_bits(), stabilised.1.to_bits(), "bottom error {plain:?} {stabilised:?}");
+    assert_eq!(
+        plain.0.to_bits(),
+        stabilised.0.to_bits(),
+        "max speed {plain:?} {stabilised:?}"
+    );
+    assert_eq!(
+        plain.1.to_bits(),
+        stabilised.1.to_bits(),
+        "bottom error {plain:?} {stabilised:?}"
+    );
 }

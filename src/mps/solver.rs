@@ -656,9 +656,31 @@ impl<const D: usize> Solver<D> {
     /// opposite, so momentum is kept), all against a wall or dummy. Idle when every pair is at
     /// least `distance_m` apart (a lattice at rest).
     fn stabilise_pairs(&mut self, dt_s: f64, distance_m: f64) {
-        let p = &self.particles;
         let nb = &self.pairs.near;
-        let dv: Vec<Vector<D>> = (0..p.len())
+        let dv = self.pair_velocity_changes(nb, |_, j, r| {
+            let d = r.norm();
+            if d >= distance_m || d == 0.0 {
+                return None;
+            }
+            let share = if self.particles.kind[j] == ParticleKind::Fluid {
+                0.5
+            } else {
+                1.0
+            };
+            Some(r * (share * (distance_m - d) / (d * dt_s)))
+        });
+        self.apply_velocity_changes(&dv, dt_s);
+    }
+
+    /// For every fluid particle i, minus the sum over its neighbours j in `nb` (in list order)
+    /// of `pair(i, j, r_ij)` where it is Some; zero elsewhere.
+    fn pair_velocity_changes(
+        &self,
+        nb: &Neighbours,
+        pair: impl Fn(usize, usize, Vector<D>) -> Option<Vector<D>> + Sync,
+    ) -> Vec<Vector<D>> {
+        let p = &self.particles;
+        (0..p.len())
             .into_par_iter()
             .with_min_len(PARTICLES_PER_TASK)
             .with_max_len(PARTICLES_PER_TASK)
@@ -669,21 +691,17 @@ impl<const D: usize> Solver<D> {
                 }
                 for &j in nb.of(i) {
                     let j = j as usize;
-                    let r = nb.displacement(&p.position_m, i, j);
-                    let d = r.norm();
-                    if d >= distance_m || d == 0.0 {
-                        continue;
+                    if let Some(v) = pair(i, j, nb.displacement(&p.position_m, i, j)) {
+                        dv -= v;
                     }
-                    let share = if p.kind[j] == ParticleKind::Fluid {
-                        0.5
-                    } else {
-                        1.0
-                    };
-                    dv -= r * (share * (distance_m - d) / (d * dt_s));
                 }
                 dv
             })
-            .collect();
+            .collect()
+    }
+
+    /// u += dv, r += dt dv at every particle.
+    fn apply_velocity_changes(&mut self, dv: &[Vector<D>], dt_s: f64) {
         let p = &mut self.particles;
         per_particle(&mut p.velocity_m_s, &mut p.position_m, |i, v, x| {
             *v += dv[i];
@@ -701,44 +719,27 @@ impl<const D: usize> Solver<D> {
         let d2 = c.collision_distance_m * c.collision_distance_m;
         let d2_wall = c.wall_collision_distance_m * c.wall_collision_distance_m;
         let e = c.collision_restitution;
-        let dv: Vec<Vector<D>> = (0..p.len())
-            .into_par_iter()
-            .with_min_len(PARTICLES_PER_TASK)
-            .with_max_len(PARTICLES_PER_TASK)
-            .map(|i| {
-                let mut dv = Vector::<D>::zeros();
-                if p.kind[i] != ParticleKind::Fluid {
-                    return dv;
-                }
-                for &j in nb.of(i) {
-                    let j = j as usize;
-                    if p.kind[j] == ParticleKind::Dummy {
-                        continue;
-                    }
-                    let r = nb.displacement(&p.position_m, i, j);
-                    let r2 = r.norm_squared();
-                    let fluid_pair = p.kind[j] == ParticleKind::Fluid;
-                    if fluid_pair && walls_only {
-                        continue;
-                    }
-                    if r2 >= (if fluid_pair { d2 } else { d2_wall }) || r2 == 0.0 {
-                        continue;
-                    }
-                    let n = r / r2.sqrt();
-                    let approach = (p.velocity_m_s[i] - p.velocity_m_s[j]).dot(&n);
-                    if approach > 0.0 {
-                        let share = if fluid_pair { 0.5 } else { 1.0 };
-                        dv -= n * ((1.0 + e) * share * approach);
-                    }
-                }
-                dv
+        let dv = self.pair_velocity_changes(nb, |i, j, r| {
+            if p.kind[j] == ParticleKind::Dummy {
+                return None;
+            }
+            let r2 = r.norm_squared();
+            let fluid_pair = p.kind[j] == ParticleKind::Fluid;
+            if fluid_pair && walls_only {
+                return None;
+            }
+            if r2 >= (if fluid_pair { d2 } else { d2_wall }) || r2 == 0.0 {
+                return None;
+            }
+            let n = r / r2.sqrt();
+            let approach = (p.velocity_m_s[i] - p.velocity_m_s[j]).dot(&n);
+            // Only approaching pairs collide; the fluid particle of a fluid-wall pair takes it all.
+            (approach > 0.0).then(|| {
+                let share = if fluid_pair { 0.5 } else { 1.0 };
+                n * ((1.0 + e) * share * approach)
             })
-            .collect();
-        let p = &mut self.particles;
-        per_particle(&mut p.velocity_m_s, &mut p.position_m, |i, v, x| {
-            *v += dv[i];
-            *x += dv[i] * dt_s;
         });
+        self.apply_velocity_changes(&dv, dt_s);
     }
 
     /// n_i with radius re_n at the current positions, over all active particles (dummies
