@@ -646,10 +646,6 @@ impl<const D: usize> Solver<D> {
         }
     }
 
-    /// (5) Collision model: fluid pairs closer than the collision distance that approach each
-    /// other exchange momentum along their line of centres with restitution e (equal masses;
-    /// walls are immovable). Jacobi-style: all impulses from the pre-collision velocities.
-    /// `walls_only`: fluid-wall pairs only.
     /// Dynamic stabilisation (Tsuruta, Khayyer & Gotoh 2013, simplified): each fluid particle
     /// closer than `distance_m` to another gets the velocity that moves it back by its share
     /// of the shortfall within this step, along the pair's axis: half against fluid (equal and
@@ -709,6 +705,10 @@ impl<const D: usize> Solver<D> {
         });
     }
 
+    /// (5) Collision model: fluid pairs closer than the collision distance that approach each
+    /// other exchange momentum along their line of centres with restitution e (equal masses;
+    /// walls are immovable). Jacobi-style: all impulses from the pre-collision velocities.
+    /// `walls_only`: fluid-wall pairs only.
     fn collide(&mut self, dt_s: f64, walls_only: bool) {
         let c = &self.config;
         if c.collision_distance_m <= 0.0 {

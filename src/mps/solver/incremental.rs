@@ -23,6 +23,11 @@
 //! particle. At rest with p^n hydrostatic, u* = 0, the source is zero, dp = 0 and nothing
 //! moves, whatever the Laplacian's truncation: the Laplacian only sets how fast a
 //! disturbance is projected out, not where the rest state lies.
+//!
+//! Two stabilisers for violent flows, both idle at rest (README, "Holding still"): wall
+//! support (`wall_support_m`: walls that fluid comes closer to become unknowns of the
+//! increment, and that fluid's carried gradient sees them no lower than itself) and pair
+//! stabilisation (`pair_stabilisation_m`, in `solver.rs`).
 use super::{PARTICLES_PER_TASK, ParticleKind, PressureScheme, SolveReport, Solver, StepError};
 use crate::mps::kernel::weight;
 use crate::mps::operators::{corrected_gradient, divergence, gradient_correction, moment_matrix};
@@ -170,8 +175,8 @@ impl<const D: usize> Solver<D> {
                 -rho / dt_s * div + compression_scale * compression
             })
             .collect();
-        // -lap(dp) over fluid neighbours: a wall's increment mirrors the particle's, so its term
-        // vanishes.
+        // -lap(dp) over fluid neighbours and supporting walls: any other wall's increment
+        // mirrors the particle's, so its term vanishes.
         let (matrix, known) = self.assemble_ppe(
             dt_s,
             &rows,
@@ -295,36 +300,39 @@ fn wall_reference<const D: usize>(
 }
 
 impl<const D: usize> Solver<D> {
-    /// Whether fluid particle i has a wall particle closer than `wall_support_m`.
-    fn pressed_against_wall(&self, i: usize) -> bool {
+    /// Whether particle i has a neighbour of `kind` closer than `wall_support_m` (false when
+    /// wall support is off): the one test behind both parts of wall support.
+    fn wall_contact(&self, i: usize, kind: ParticleKind) -> bool {
         let reach = self.config.wall_support_m;
         let p = &self.particles;
         let nb = &self.pairs.near;
         reach > 0.0
             && nb.of(i).iter().any(|&j| {
-                p.kind[j as usize] == ParticleKind::Wall
+                p.kind[j as usize] == kind
                     && nb.displacement(&p.position_m, i, j as usize).norm() < reach
             })
     }
 
+    /// Whether fluid particle i has a wall particle closer than `wall_support_m`.
+    fn pressed_against_wall(&self, i: usize) -> bool {
+        self.wall_contact(i, ParticleKind::Wall)
+    }
+
     /// The wall particles (not dummies) with a fluid particle closer than `wall_support_m`:
-    /// the supporting walls of this step's increment (all false when wall support is off).
+    /// the supporting walls of this step's increment.
     fn supporting_walls(&self) -> Vec<bool> {
-        let reach = self.config.wall_support_m;
         let p = &self.particles;
-        let nb = &self.pairs.near;
+        if self.config.wall_support_m <= 0.0 {
+            return vec![false; p.len()];
+        }
         (0..p.len())
             .into_par_iter()
             .with_min_len(PARTICLES_PER_TASK)
             .with_max_len(PARTICLES_PER_TASK)
             .map(|i| {
-                reach > 0.0
-                    && p.kind[i] == ParticleKind::Wall
+                p.kind[i] == ParticleKind::Wall
                     && !self.pairs.lap.of(i).is_empty()
-                    && nb.of(i).iter().any(|&j| {
-                        p.kind[j as usize] == ParticleKind::Fluid
-                            && nb.displacement(&p.position_m, i, j as usize).norm() < reach
-                    })
+                    && self.wall_contact(i, ParticleKind::Fluid)
             })
             .collect()
     }
