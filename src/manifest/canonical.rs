@@ -6,8 +6,9 @@
 //! round-trip form, `-0.0` written as `0.0`, integers as integers. Settings added after the
 //! format was first used are left out while they are at their original behaviour
 //! (`mps.ppe_preconditioner: jacobi`, `mps.pressure_scheme: standard` with
-//! `mps.compression_relaxation`, `mps.pair_stabilisation` and `mps.wall_support` at 0 (and
-//! under the standard scheme), `stop.rest_*` without `stop.rest_metric`, null
+//! `mps.compression_relaxation`, `mps.pair_stabilisation`, `mps.wall_support` and
+//! `mps.pressure_regularisation` (with `mps.regularisation_radius`) at 0 (and under the
+//! standard scheme), `stop.rest_*` without `stop.rest_metric`, null
 //! `mps.wall_collision_*`, `time.dt_min_s` and `stop.max_ghost_particles`, an empty
 //! `boundaries` section), so every experiment keeps the hash it had before they existed and
 //! files written then still verify. JSON is YAML, so the canonical text loads back through
@@ -57,6 +58,13 @@ pub fn canonical_text<S: SceneSection>(manifest: &Manifest<S>) -> String {
             if v == 0.0 || manifest.mps.pressure_scheme == PressureSchemeName::Standard {
                 mps.remove(key);
             }
+        }
+        // The radius is read only with the regularisation on.
+        if manifest.mps.pressure_regularisation == 0.0
+            || manifest.mps.pressure_scheme == PressureSchemeName::Standard
+        {
+            mps.remove("pressure_regularisation");
+            mps.remove("regularisation_radius");
         }
     }
     for (section, key) in [

@@ -186,6 +186,27 @@ pub fn check<S: SceneSection>(m: &Manifest<S>) -> Vec<Issue> {
         between(0.0, true, 1.0, false),
     );
     c.real(
+        "mps.pressure_regularisation",
+        p.pressure_regularisation,
+        between(0.0, true, 10.0, true),
+    );
+    let reg_ok = c.real(
+        "mps.regularisation_radius",
+        p.regularisation_radius,
+        between(1.0, false, 2.0, false),
+    );
+    // The regularisation sums over the number-density neighbour lists.
+    if nd_ok && reg_ok && p.regularisation_radius > p.number_density_radius {
+        c.fail(
+            "mps.regularisation_radius",
+            format!(
+                "must be <= mps.number_density_radius ({}), got {}",
+                fmt_num(p.number_density_radius),
+                fmt_num(p.regularisation_radius)
+            ),
+        );
+    }
+    c.real(
         "mps.collision_distance",
         p.collision_distance,
         between(0.0, true, 1.0, false),

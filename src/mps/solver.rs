@@ -53,6 +53,11 @@ pub struct SolverConfig<const D: usize> {
     /// part in the increment's PPE, and that fluid particle's carried gradient sees its walls
     /// no lower than itself (0 = off). Idle at rest, where fluid sits a spacing from walls.
     pub wall_support_m: f64,
+    /// Incremental scheme: beta of the pressure regularisation, -(beta p_i/rho) (d/n0)
+    /// sum_j r_ij w(r_ij)/r_ij^2 over neighbours within `regularisation_radius_m` (0 = off).
+    /// Zero on a lattice at rest.
+    pub pressure_regularisation: f64,
+    pub regularisation_radius_m: f64,
     /// Aggregation multigrid instead of Jacobi as the PPE preconditioner.
     pub multigrid_ppe: bool,
     pub compressibility_1_pa: f64,

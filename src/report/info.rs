@@ -36,8 +36,9 @@ pub struct RunInfo {
     /// without a `/summary` message.
     pub stop_rule: Option<String>,
     /// `mps.pressure_scheme` of the stored manifest (`standard` when the canonical form leaves
-    /// it out, as it does for that default), followed by `, mps.pair_stabilisation X` and
-    /// `, mps.wall_support Y` when the run had them on; `None` without a readable manifest.
+    /// it out, as it does for that default), followed by `, mps.pair_stabilisation X`,
+    /// `, mps.wall_support Y` and `, mps.pressure_regularisation B, mps.regularisation_radius
+    /// R` when the run had them on; `None` without a readable manifest.
     pub pressure_scheme: Option<String>,
     /// The `build` metadata: crate_version, git_commit, rustc, target, profile.
     pub build: BTreeMap<String, String>,
@@ -201,7 +202,12 @@ pub fn run_info(path: &Path, size_bytes: u64, run: &RunFile) -> RunInfo {
                 .unwrap_or("standard")
                 .to_string();
             // The stabilisers are in the canonical form only when on.
-            for key in ["pair_stabilisation", "wall_support"] {
+            for key in [
+                "pair_stabilisation",
+                "wall_support",
+                "pressure_regularisation",
+                "regularisation_radius",
+            ] {
                 if let Some(v) = mps.and_then(|mps| mps.get(key)) {
                     text.push_str(&format!(", mps.{key} {v}"));
                 }

@@ -113,7 +113,7 @@ impl<const D: usize> Solver<D> {
                         }
                     },
                 );
-                g * (-1.0 / rho)
+                (g + self.regularisation(i, pi)) * (-1.0 / rho)
             })
             .collect()
     }
@@ -300,6 +300,35 @@ fn wall_reference<const D: usize>(
 }
 
 impl<const D: usize> Solver<D> {
+    /// The pressure regularisation's pseudo-gradient at fluid particle i (zero when off or
+    /// p_i <= 0): beta p_i (d/n0) sum_j r_ij w_s(r_ij)/r_ij^2 over every neighbour (fluid,
+    /// wall, dummy) within the regularisation radius, w_s the MPS weight of that radius. Its
+    /// force pushes i away from whichever neighbour is closer than the others, with a
+    /// stiffness that grows with the pressure, as the p_j - p_min term of the standard scheme
+    /// does; but it sums to zero over a complete first shell, so a lattice at rest feels
+    /// nothing. The consistent gradient alone leaves modes that it does not see (a column
+    /// pair moving apart in alternate rows) free, and the walls' terms of the divergence drive
+    /// them: measured, a 6 x 60 column of water at 10 mm blows up within 0.6 s without it.
+    fn regularisation(&self, i: usize, pi: f64) -> Vector<D> {
+        let beta = self.config.pressure_regularisation;
+        let mut sum = Vector::<D>::zeros();
+        if beta <= 0.0 || pi <= 0.0 {
+            return sum;
+        }
+        let p = &self.particles;
+        let nb = &self.pairs.near;
+        let radius = self.config.regularisation_radius_m;
+        for &j in nb.of(i) {
+            let r = nb.displacement(&p.position_m, i, j as usize);
+            let r2 = r.norm_squared();
+            let w = weight(r2.sqrt(), radius);
+            if w > 0.0 {
+                sum += r * (w / r2);
+            }
+        }
+        sum * (beta * pi * D as f64 / self.refs.n0)
+    }
+
     /// Whether particle i has a neighbour of `kind` closer than `wall_support_m` (false when
     /// wall support is off): the one test behind both parts of wall support.
     fn wall_contact(&self, i: usize, kind: ParticleKind) -> bool {
