@@ -662,6 +662,43 @@ fn invalid_values_are_named_and_located() {
         &[">= 1"],
     );
 
+    // The pressure regularisation: its radius between the first and the second shell, and
+    // 2D only (measured unstable in 3D).
+    let e = err_with(
+        MINIMAL,
+        &[
+            "mps.pressure_scheme=incremental",
+            "mps.pressure_regularisation=1",
+            "mps.regularisation_radius=2.5",
+        ],
+    );
+    assert_invalid(&e, "mps.regularisation_radius", None, &["(1, 2)", "2.5"]);
+    let e = err_with(
+        MINIMAL,
+        &[
+            "dimension=3",
+            "mps.pressure_scheme=incremental",
+            "mps.pressure_regularisation=1",
+        ],
+    );
+    assert_invalid(&e, "mps.pressure_regularisation", None, &["2D only"]);
+    // Off, it is no part of the experiment: the hash is the one without the fields.
+    let plain = ok_with(MINIMAL, &["mps.pressure_scheme=incremental"]);
+    let off = ok_with(
+        MINIMAL,
+        &[
+            "mps.pressure_scheme=incremental",
+            "mps.pressure_regularisation=0",
+            "mps.regularisation_radius=1.7",
+        ],
+    );
+    assert_eq!(plain.hash_hex, off.hash_hex);
+    let on = ok_with(
+        MINIMAL,
+        &["mps.pressure_scheme=incremental", "mps.pressure_regularisation=1"],
+    );
+    assert_ne!(plain.hash_hex, on.hash_hex);
+
     // from an override: no line, says so
     let e = err_with(MINIMAL, &["time.courant=1.5"]);
     assert_invalid(&e, "time.courant", None, &["(from --set)"]);

@@ -195,6 +195,17 @@ pub fn check<S: SceneSection>(m: &Manifest<S>) -> Vec<Issue> {
         p.regularisation_radius,
         between(1.0, false, 2.0, false),
     );
+    // Measured unstable in 3D (README "Holding still"): a 3D tank at rest that holds still
+    // without it grows to 0.1 m/s within 1.5 s with it.
+    if m.dimension == 3 && p.pressure_regularisation > 0.0 {
+        c.fail(
+            "mps.pressure_regularisation",
+            format!(
+                "is 2D only (it destabilises a 3D tank at rest, README \"Holding still\"); got {} with dimension 3",
+                fmt_num(p.pressure_regularisation)
+            ),
+        );
+    }
     // The regularisation sums over the number-density neighbour lists.
     if nd_ok && reg_ok && p.regularisation_radius > p.number_density_radius {
         c.fail(
