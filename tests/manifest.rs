@@ -695,7 +695,10 @@ fn invalid_values_are_named_and_located() {
     assert_eq!(plain.hash_hex, off.hash_hex);
     let on = ok_with(
         MINIMAL,
-        &["mps.pressure_scheme=incremental", "mps.pressure_regularisation=1"],
+        &[
+            "mps.pressure_scheme=incremental",
+            "mps.pressure_regularisation=1",
+        ],
     );
     assert_ne!(plain.hash_hex, on.hash_hex);
 

@@ -229,7 +229,10 @@ fn pressure_regularisation_holds_a_deep_narrow_column() {
     let free = deep_narrow_column(0.0);
     eprintln!("deep narrow column: max speed {held:.3e} m/s with, {free:.3e} without");
     // 1 % of sqrt(gH) is 24 mm/s; measured about 1e-4 m/s (the manifest run: 1e-4 m/s to 3 s).
-    assert!(held < 1e-3, "with the regularisation: max speed {held:.3e} m/s");
+    assert!(
+        held < 1e-3,
+        "with the regularisation: max speed {held:.3e} m/s"
+    );
     assert!(
         free > 0.1,
         "without it the column should blow up: max speed {free:.3e} m/s"
@@ -262,5 +265,8 @@ fn pressure_regularisation_keeps_the_still_tank() {
     let with = run(1.0);
     let without = run(0.0);
     eprintln!("still tank: max speed {with:.3e} m/s with, {without:.3e} without");
-    assert!(with < 1e-3, "max speed with {with:.3e} m/s, without {without:.3e}");
+    assert!(
+        with < 1e-3,
+        "max speed with {with:.3e} m/s, without {without:.3e}"
+    );
 }
