@@ -701,6 +701,22 @@ fn invalid_values_are_named_and_located() {
         ],
     );
     assert_ne!(plain.hash_hex, on.hash_hex);
+    // surface_depth and corrected_strain_rate likewise.
+    let off = ok_with(
+        MINIMAL,
+        &[
+            "mps.pressure_scheme=incremental",
+            "mps.surface_depth=0",
+            "mps.corrected_strain_rate=false",
+        ],
+    );
+    assert_eq!(plain.hash_hex, off.hash_hex);
+    for on in ["mps.surface_depth=0.5", "mps.corrected_strain_rate=true"] {
+        let on = ok_with(MINIMAL, &["mps.pressure_scheme=incremental", on]);
+        assert_ne!(plain.hash_hex, on.hash_hex);
+    }
+    let e = err_with(MINIMAL, &["mps.surface_depth=1.5"]);
+    assert_invalid(&e, "mps.surface_depth", None, &["[0, 1]", "1.5"]);
 
     // from an override: no line, says so
     let e = err_with(MINIMAL, &["time.courant=1.5"]);

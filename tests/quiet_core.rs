@@ -270,3 +270,102 @@ fn pressure_regularisation_keeps_the_still_tank() {
         "max speed with {with:.3e} m/s, without {without:.3e}"
     );
 }
+
+/// The strain rate's velocity gradient on a free surface: for simple shear u = (a y, 0) the
+/// corrected gradient (`mps.corrected_strain_rate`) is exact at every row up to a flat
+/// surface, where the plain gradient model gives the surface row about half the shear.
+#[test]
+fn corrected_velocity_gradient_is_exact_up_to_the_free_surface() {
+    use mps_runner::mps::Particles;
+    use mps_runner::mps::kernel::RefValues;
+    use mps_runner::mps::viscosity::velocity_gradient;
+    let l0 = 0.01;
+    let refs = RefValues::on_lattice::<2>(l0, 2.1 * l0, 3.1 * l0);
+    let shear = 3.0;
+    let (columns, rows) = (12, 8);
+    let mut p = Particles::<2>::default();
+    for row in 0..rows {
+        for column in 0..columns {
+            let x = Vector::<2>::new(column as f64 * l0, row as f64 * l0);
+            p.push(x, ParticleKind::Fluid);
+        }
+    }
+    for i in 0..p.len() {
+        p.velocity_m_s[i] = Vector::<2>::new(shear * p.position_m[i][1], 0.0);
+    }
+    let nb = Neighbours::build(&p.position_m, refs.radius_n_m);
+    // The middle columns of the top row (a flat free surface above them).
+    let top: Vec<usize> = (0..p.len())
+        .filter(|&i| {
+            let x = p.position_m[i];
+            x[1] > (rows - 1) as f64 * l0 - 1e-9
+                && x[0] > 3.0 * l0
+                && x[0] < (columns - 4) as f64 * l0
+        })
+        .collect();
+    assert!(top.len() >= 4);
+    for &i in &top {
+        let corrected = velocity_gradient(&p, &nb, &refs, i, true);
+        let plain = velocity_gradient(&p, &nb, &refs, i, false);
+        assert!(
+            (corrected[(0, 1)] - shear).abs() < 1e-9 * shear && corrected[(1, 0)].abs() < 1e-9,
+            "corrected du/dy {} at the surface, expected {shear}",
+            corrected[(0, 1)]
+        );
+        // The plain model misses the half stencil above the surface row.
+        assert!(
+            plain[(0, 1)] < 0.7 * shear,
+            "plain du/dy {} at the surface",
+            plain[(0, 1)]
+        );
+    }
+}
+
+/// With `surface_depth` 0.5 the surface particles hold the pressure of the half spacing of
+/// water above their centres: the still tank's bottom row then has the hydrostatic pressure
+/// of the fill height H = y_top + l0/2, where at 0 it is l0/(2 (H - y)) low, and the tank
+/// stays as still.
+#[test]
+fn surface_depth_puts_the_zero_of_pressure_at_the_fill_height() {
+    let l0 = 0.02;
+    let run = |depth: f64| {
+        let (particles, lo, hi) = walled_box::<2>(l0, [30, 14], 10);
+        let mut cfg = config::<2>(l0, lo, hi);
+        cfg.rheology = mps_runner::mps::Rheology::Newtonian {
+            viscosity_pa_s: 1e-3,
+        };
+        cfg.pressure_scheme = PressureScheme::Incremental;
+        cfg.surface_depth_m = depth * l0;
+        let mut solver = Solver::new(cfg, particles);
+        let top = (0..solver.particles.len())
+            .filter(|&i| solver.particles.kind[i] == ParticleKind::Fluid)
+            .map(|i| solver.particles.position_m[i][1])
+            .fold(f64::MIN, f64::max);
+        let mut max_speed = 0.0f64;
+        while advance(&mut solver, 2.0) {
+            if solver.time_s >= 0.5 {
+                max_speed = max_speed.max(solver.max_fluid_speed_m_s());
+            }
+        }
+        let p = &solver.particles;
+        let bottom: Vec<usize> = (0..p.len())
+            .filter(|&i| p.kind[i] == ParticleKind::Fluid && p.position_m[i][1] < 0.75 * l0)
+            .collect();
+        let fill_height = top + 0.5 * l0;
+        let measured: f64 = bottom.iter().map(|&i| p.pressure_pa[i]).sum();
+        let expected: f64 = bottom
+            .iter()
+            .map(|&i| 1000.0 * 9.81 * (fill_height - p.position_m[i][1]))
+            .sum();
+        (max_speed, measured / expected - 1.0)
+    };
+    let (speed, error) = run(0.5);
+    let (speed_at_centres, error_at_centres) = run(0.0);
+    eprintln!(
+        "surface_depth 0.5: max speed {speed:.2e} m/s, bottom error {error:.2e}; 0: {speed_at_centres:.2e} m/s, {error_at_centres:.2e}"
+    );
+    assert!(speed < 1e-3, "max speed {speed:.3e} m/s");
+    assert!(error.abs() < 0.002, "bottom pressure error {error:.4}");
+    // At the centres the bottom row is short by l0/(2 (H - y)): 10 rows, 5.3 %.
+    assert!(error_at_centres < -0.04, "{error_at_centres:.4}");
+}

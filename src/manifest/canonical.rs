@@ -7,8 +7,8 @@
 //! format was first used are left out while they are at their original behaviour
 //! (`mps.ppe_preconditioner: jacobi`, `mps.pressure_scheme: standard` with
 //! `mps.compression_relaxation`, `mps.pair_stabilisation`, `mps.wall_support` and
-//! `mps.pressure_regularisation` (with `mps.regularisation_radius`) at 0 (and under the
-//! standard scheme), `stop.rest_*` without `stop.rest_metric`, null
+//! `mps.pressure_regularisation` (with `mps.regularisation_radius`) and `mps.surface_depth`
+//! at 0 (and under the standard scheme), `mps.corrected_strain_rate` false, `stop.rest_*` without `stop.rest_metric`, null
 //! `mps.wall_collision_*`, `time.dt_min_s` and `stop.max_ghost_particles`, an empty
 //! `boundaries` section), so every experiment keeps the hash it had before they existed and
 //! files written then still verify. JSON is YAML, so the canonical text loads back through
@@ -58,6 +58,14 @@ pub fn canonical_text<S: SceneSection>(manifest: &Manifest<S>) -> String {
             if v == 0.0 || manifest.mps.pressure_scheme == PressureSchemeName::Standard {
                 mps.remove(key);
             }
+        }
+        if manifest.mps.surface_depth == 0.0
+            || manifest.mps.pressure_scheme == PressureSchemeName::Standard
+        {
+            mps.remove("surface_depth");
+        }
+        if !manifest.mps.corrected_strain_rate {
+            mps.remove("corrected_strain_rate");
         }
         // The radius is read only with the regularisation on.
         if manifest.mps.pressure_regularisation == 0.0

@@ -234,6 +234,19 @@ pub struct Mps {
     /// the second, so that the row below a flat surface has its whole shell.
     #[serde(default = "default_regularisation_radius")]
     pub regularisation_radius: f64,
+    /// Incremental scheme, units of spacing, in [0, 1]: a free-surface particle holds the
+    /// hydrostatic pressure of this depth of fluid beyond its centre along its outward normal,
+    /// rho |g| d l0 max(-n . g/|g|, 0) (n from its neighbours, walls standing above it left
+    /// out), instead of 0: the surface lies half a spacing beyond the surface particles'
+    /// centres, so 0.5 puts the zero of pressure there. 0 = off (p = 0 at the centres).
+    /// Unused by `standard`.
+    #[serde(default)]
+    pub surface_depth: f64,
+    /// The velocity gradient of the strain rate with the corrective matrix (first-order
+    /// consistent, as the incremental scheme's pressure gradient) instead of the plain MPS
+    /// gradient model, which is short by up to half near the free surface and walls.
+    #[serde(default)]
+    pub corrected_strain_rate: bool,
     /// Artificial compressibility on the PPE diagonal, in 1/Pa.
     #[serde(default = "default_compressibility_1_pa")]
     pub compressibility_1_pa: f64,
@@ -293,6 +306,8 @@ impl Default for Mps {
             wall_support: 0.0,
             pressure_regularisation: 0.0,
             regularisation_radius: default_regularisation_radius(),
+            surface_depth: 0.0,
+            corrected_strain_rate: false,
             ppe_preconditioner: PpePreconditioner::default(),
             compressibility_1_pa: default_compressibility_1_pa(),
             collision_distance: default_collision_distance(),

@@ -195,6 +195,11 @@ pub fn check<S: SceneSection>(m: &Manifest<S>) -> Vec<Issue> {
         p.regularisation_radius,
         between(1.0, false, 2.0, false),
     );
+    c.real(
+        "mps.surface_depth",
+        p.surface_depth,
+        between(0.0, true, 1.0, true),
+    );
     // Measured unstable in 3D (README "Holding still"): a 3D tank at rest that holds still
     // without it grows to 0.1 m/s within 1.5 s with it.
     if m.dimension == 3 && p.pressure_regularisation > 0.0 {

@@ -140,6 +140,12 @@ pub fn moment_matrix<const D: usize>(
     m
 }
 
+/// The share of the full lattice's det M below which the corrective matrix is not used (a
+/// particle with neighbours on one side only: a splash, a thin jet), where the uncorrected
+/// normalisation's error is bounded: the incremental scheme's gradients and the corrected
+/// strain rate.
+pub const MIN_DET_RATIO: f64 = 0.05;
+
 /// The correction that makes `sum_j (phi_j - phi_i) r_ij w / |r_ij|^2` a first-order
 /// consistent gradient: M_i^-1 where M_i is well conditioned, else the uncorrected
 /// normalisation d/n0 (a particle with too few neighbours, e.g. a splash). "Well conditioned":

@@ -58,6 +58,11 @@ pub struct SolverConfig<const D: usize> {
     /// Zero on a lattice at rest.
     pub pressure_regularisation: f64,
     pub regularisation_radius_m: f64,
+    /// Incremental scheme: a free-surface particle holds rho |g| surface_depth_m
+    /// max(-n . g/|g|, 0) (0 = p = 0 at surface particles).
+    pub surface_depth_m: f64,
+    /// Strain rate from the corrected velocity gradient (corrective matrix).
+    pub corrected_strain_rate: bool,
     /// Aggregation multigrid instead of Jacobi as the PPE preconditioner.
     pub multigrid_ppe: bool,
     pub compressibility_1_pa: f64,
@@ -351,6 +356,7 @@ impl<const D: usize> Solver<D> {
             stress_gradient_term: c.stress_gradient_term,
             tolerance: c.viscosity_tolerance,
             max_iterations: c.viscosity_max_iterations,
+            corrected_gradient: c.corrected_strain_rate,
         }
     }
 

@@ -2,6 +2,7 @@
 //! term of seed 000 eq. 8, and the implicit viscous predictor solved by CG.
 use super::grid::{KernelPairs, Neighbours};
 use super::kernel::{RefValues, weight};
+use super::operators::{MIN_DET_RATIO, gradient_correction};
 use super::particles::{ParticleKind, Particles, Vector};
 use super::pressure::{CsrMatrix, Preconditioner, SolveReport, solve_pcg_many};
 use super::reduce::PARTICLES_PER_TASK;
@@ -18,6 +19,8 @@ pub struct ViscousSettings {
     pub stress_gradient_term: bool,
     pub tolerance: f64,
     pub max_iterations: u32,
+    /// Velocity gradient with the corrective matrix (see [`velocity_gradient`]).
+    pub corrected_gradient: bool,
 }
 
 /// Result of the viscous stage.
@@ -33,15 +36,21 @@ pub struct ViscousStage<const D: usize> {
 
 /// Velocity gradient G_ab = d u_a / d x_b at fluid particle i by the gradient model (eq. 3,
 /// applied to each velocity component as in seed 000 eqs. 12-13); walls and dummies carry
-/// their own velocity, which makes the floor no-slip.
+/// their own velocity, which makes the floor no-slip. `corrected`: the sum is normalised by
+/// the corrective matrix M_i^-1 (Khayyer & Gotoh 2011) instead of d/n0, which makes it exact
+/// for a linear velocity field on a truncated stencil (the free surface: the plain model
+/// gives a flat surface's top row half the shear rate); the uncorrected d/n0 where M_i is
+/// ill-conditioned (a splash).
 pub fn velocity_gradient<const D: usize>(
     p: &Particles<D>,
     nb: &Neighbours,
     refs: &RefValues,
     i: usize,
+    corrected: bool,
 ) -> SMatrix<f64, D, D> {
     let ui = p.velocity_m_s[i];
     let mut g = SMatrix::<f64, D, D>::zeros();
+    let mut m = SMatrix::<f64, D, D>::zeros();
     for &j in nb.of(i) {
         let j = j as usize;
         let r = nb.displacement(&p.position_m, i, j);
@@ -51,8 +60,15 @@ pub fn velocity_gradient<const D: usize>(
             continue;
         }
         g += (p.velocity_m_s[j] - ui) * (r.transpose() * (w / r2));
+        if corrected {
+            m += r * r.transpose() * (w / r2);
+        }
     }
-    g * (D as f64 / refs.n0)
+    if corrected {
+        g * gradient_correction(&m, refs.n0, MIN_DET_RATIO)
+    } else {
+        g * (D as f64 / refs.n0)
+    }
 }
 
 /// Pi = 2 e_ij e_ij with e = (G + G^T)/2 (seed 000 eqs. 9-11, full tensor contraction).
@@ -94,7 +110,13 @@ pub fn predict_velocity<const D: usize>(
         .with_max_len(PARTICLES_PER_TASK)
         .map(|i| {
             if is_fluid(i) {
-                strain_invariant(&velocity_gradient(p, &pairs.near, refs, i))
+                strain_invariant(&velocity_gradient(
+                    p,
+                    &pairs.near,
+                    refs,
+                    i,
+                    settings.corrected_gradient,
+                ))
             } else {
                 0.0
             }

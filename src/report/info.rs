@@ -37,8 +37,9 @@ pub struct RunInfo {
     pub stop_rule: Option<String>,
     /// `mps.pressure_scheme` of the stored manifest (`standard` when the canonical form leaves
     /// it out, as it does for that default), followed by `, mps.pair_stabilisation X`,
-    /// `, mps.wall_support Y` and `, mps.pressure_regularisation B, mps.regularisation_radius
-    /// R` when the run had them on; `None` without a readable manifest.
+    /// `, mps.wall_support Y`, `, mps.pressure_regularisation B, mps.regularisation_radius
+    /// R`, `, mps.surface_depth S` and `, mps.corrected_strain_rate true` when the run had
+    /// them on; `None` without a readable manifest.
     pub pressure_scheme: Option<String>,
     /// The `build` metadata: crate_version, git_commit, rustc, target, profile.
     pub build: BTreeMap<String, String>,
@@ -207,6 +208,8 @@ pub fn run_info(path: &Path, size_bytes: u64, run: &RunFile) -> RunInfo {
                 "wall_support",
                 "pressure_regularisation",
                 "regularisation_radius",
+                "surface_depth",
+                "corrected_strain_rate",
             ] {
                 if let Some(v) = mps.and_then(|mps| mps.get(key)) {
                     text.push_str(&format!(", mps.{key} {v}"));

@@ -30,17 +30,14 @@
 //! stabilisation (`pair_stabilisation_m`, in `solver.rs`).
 use super::{PARTICLES_PER_TASK, ParticleKind, PressureScheme, SolveReport, Solver, StepError};
 use crate::mps::kernel::weight;
-use crate::mps::operators::{corrected_gradient, divergence, gradient_correction, moment_matrix};
+use crate::mps::operators::{
+    MIN_DET_RATIO, corrected_gradient, divergence, gradient_correction, moment_matrix,
+};
 use crate::mps::particles::Vector;
 use nalgebra::SMatrix;
 use rayon::prelude::*;
 use std::cell::OnceCell;
 use std::time::Instant;
-
-/// The corrective matrix is used where det M_i is at least this share of the full lattice's;
-/// below it (a particle with neighbours on one side only: a splash, a thin jet) the gradient
-/// falls back to the uncorrected normalisation, whose error there is bounded.
-const MIN_DET_RATIO: f64 = 0.05;
 
 impl<const D: usize> Solver<D> {
     /// Corrective matrix of every fluid particle at the current positions (identity-scaled
@@ -133,8 +130,8 @@ impl<const D: usize> Solver<D> {
         let corrections = self.gradient_corrections();
         let p = &self.particles;
         let is_fluid = |i: usize| p.kind[i] == ParticleKind::Fluid;
-        // Fluid below the threshold is on the surface: its increment is known, -p^n (so that
-        // p^(n+1) = 0). The other fluid particles are the unknowns. Walls have none: the
+        // Fluid below the threshold is on the surface: its increment is known, p_s - p^n (so
+        // that p^(n+1) = p_s, 0 unless `surface_depth_m` is on). The other fluid particles are the unknowns. Walls have none: the
         // increment's normal derivative is zero there (measured: with walls as unknowns, as
         // in the standard scheme, the tank at rest diverges within 3 s at dt/2).
         let threshold = c.surface_threshold * refs.n0;
@@ -142,6 +139,8 @@ impl<const D: usize> Solver<D> {
             .map(|i| is_fluid(i) && number_density[i] < threshold)
             .collect();
         let surface_count = surface.iter().filter(|&&s| s).count();
+        let surface_value = self.surface_pressure(&surface);
+        let surface_on = c.surface_depth_m > 0.0;
         // Wall support: walls that a fluid particle has come closer to than
         // `wall_support_m` are unknowns too (their own divergence as the source), so the
         // increment can push back on fluid driven into them.
@@ -182,7 +181,14 @@ impl<const D: usize> Solver<D> {
             &rows,
             &unknown_of,
             |j| is_fluid(j) || support[j],
-            |j| -p.pressure_pa[j],
+            // (-p^n as it stands when the surface holds 0: the same bits as before the option.)
+            |j| {
+                if surface_on {
+                    surface_value[j] - p.pressure_pa[j]
+                } else {
+                    -p.pressure_pa[j]
+                }
+            },
         );
         let rhs: Vec<f64> = source.iter().zip(&known).map(|(s, k)| s + k).collect();
         // The increment is small once the carried pressure has settled: start from zero.
@@ -200,7 +206,7 @@ impl<const D: usize> Solver<D> {
         // supporting wall's increment acts in this correction only.
         let new_pressure: Vec<f64> = (0..p.len())
             .map(|i| match unknown_of[i] {
-                u32::MAX => 0.0,
+                u32::MAX => surface_value[i],
                 _ if !is_fluid(i) => 0.0,
                 k => (p.pressure_pa[i] + solution[k as usize]).max(0.0),
             })
@@ -312,6 +318,10 @@ impl<const D: usize> Solver<D> {
     fn regularisation(&self, i: usize, pi: f64) -> Vector<D> {
         let beta = self.config.pressure_regularisation;
         let mut sum = Vector::<D>::zeros();
+        // Measured from a flat surface's value, so that the surface row (incomplete shell)
+        // feels none of it.
+        let pi =
+            pi - self.config.density_kg_m3 * self.gravity().norm() * self.config.surface_depth_m;
         if beta <= 0.0 || pi <= 0.0 {
             return sum;
         }
@@ -327,6 +337,56 @@ impl<const D: usize> Solver<D> {
             }
         }
         sum * (beta * pi * D as f64 / self.refs.n0)
+    }
+
+    /// The pressure each free-surface particle holds (0 elsewhere): rho |g| surface_depth_m
+    /// max(-n . g/|g|, 0), the hydrostatic pressure of that depth of fluid beyond its centre
+    /// along its outward normal n. n is minus the kernel-weighted mean direction to its
+    /// neighbours (fluid, and walls and dummies except those standing above it: a tank's
+    /// sides above the fill would tilt the normal of the surface particles next to them).
+    /// All zeros when `surface_depth_m` is 0.
+    fn surface_pressure(&self, surface: &[bool]) -> Vec<f64> {
+        let p = &self.particles;
+        let depth = self.config.surface_depth_m;
+        let g = self.gravity();
+        let g_norm = g.norm();
+        if depth <= 0.0 || g_norm == 0.0 {
+            return vec![0.0; p.len()];
+        }
+        let down = g / g_norm;
+        let nb = &self.pairs.near;
+        let scale = self.config.density_kg_m3 * g_norm * depth;
+        // "Above": more than a quarter spacing higher than i.
+        let above_m = 0.25 * self.config.spacing_m;
+        (0..p.len())
+            .into_par_iter()
+            .with_min_len(PARTICLES_PER_TASK)
+            .with_max_len(PARTICLES_PER_TASK)
+            .map(|i| {
+                if !surface[i] {
+                    return 0.0;
+                }
+                let mut inward = Vector::<D>::zeros();
+                for &j in nb.of(i) {
+                    let j = j as usize;
+                    let r = nb.displacement(&p.position_m, i, j);
+                    if p.kind[j] != ParticleKind::Fluid && -r.dot(&down) > above_m {
+                        continue;
+                    }
+                    let d = r.norm();
+                    let w = weight(d, self.refs.radius_n_m);
+                    if w > 0.0 {
+                        inward += r * (w / d);
+                    }
+                }
+                let length = inward.norm();
+                if length == 0.0 {
+                    return 0.0;
+                }
+                // -n . g/|g| with n = -inward/|inward|.
+                scale * (inward / length).dot(&down).max(0.0)
+            })
+            .collect()
     }
 
     /// Whether particle i has a neighbour of `kind` closer than `wall_support_m` (false when
