@@ -6,7 +6,7 @@ mod core_setup;
 use core_setup::{advance, config, walled_box};
 use mps_runner::mps::grid::Neighbours;
 use mps_runner::mps::operators::{corrected_gradient, gradient_correction, moment_matrix};
-use mps_runner::mps::{ParticleKind, PressureScheme, Solver, Vector};
+use mps_runner::mps::{ParticleKind, PressureScheme, Solver, SolverConfig, Vector};
 
 /// A fixed pseudo-random sequence in [-1, 1) (64-bit LCG), for a reproducible disorder.
 fn jitter(state: &mut u64) -> f64 {
@@ -104,15 +104,30 @@ fn still_tank_with<const D: usize>(
     end_s: f64,
     stabilisers: f64,
 ) -> (f64, f64) {
+    still_tank_configured(cells, fill_rows, end_s, 0.0, |cfg, l0| {
+        cfg.pressure_scheme = scheme;
+        cfg.pair_stabilisation_m = stabilisers * l0;
+        cfg.wall_support_m = stabilisers * l0;
+    })
+}
+
+/// The still tank of [`still_tank`] (20 mm, water) with `configure(config, spacing)` applied,
+/// its bottom pressure measured against rho g (y_top + surface_offset l0 - y): the zero of
+/// pressure `surface_offset` spacings above the top row's centres.
+fn still_tank_configured<const D: usize>(
+    cells: [i64; D],
+    fill_rows: i64,
+    end_s: f64,
+    surface_offset: f64,
+    configure: impl FnOnce(&mut SolverConfig<D>, f64),
+) -> (f64, f64) {
     let l0 = 0.02;
     let (particles, lo, hi) = walled_box::<D>(l0, cells, fill_rows);
     let mut cfg = config::<D>(l0, lo, hi);
     cfg.rheology = mps_runner::mps::Rheology::Newtonian {
         viscosity_pa_s: 1e-3,
     };
-    cfg.pressure_scheme = scheme;
-    cfg.pair_stabilisation_m = stabilisers * l0;
-    cfg.wall_support_m = stabilisers * l0;
+    configure(&mut cfg, l0);
     let mut solver = Solver::new(cfg, particles);
     let fluid = |s: &Solver<D>| {
         (0..s.particles.len())
@@ -123,6 +138,7 @@ fn still_tank_with<const D: usize>(
         .iter()
         .map(|&i| solver.particles.position_m[i][D - 1])
         .fold(f64::MIN, f64::max);
+    let surface = top + surface_offset * l0;
     let mut max_speed = 0.0f64;
     while advance(&mut solver, end_s) {
         if solver.time_s >= 0.5 {
@@ -138,7 +154,7 @@ fn still_tank_with<const D: usize>(
     let measured: f64 = bottom.iter().map(|&i| p.pressure_pa[i]).sum::<f64>();
     let expected: f64 = bottom
         .iter()
-        .map(|&i| rho_g * (top - p.position_m[i][D - 1]))
+        .map(|&i| rho_g * (surface - p.position_m[i][D - 1]))
         .sum::<f64>();
     (max_speed, measured / expected - 1.0)
 }
@@ -244,23 +260,12 @@ fn pressure_regularisation_holds_a_deep_narrow_column() {
 /// and as hydrostatic with it as without.
 #[test]
 fn pressure_regularisation_keeps_the_still_tank() {
-    let l0 = 0.02;
     let run = |beta: f64| {
-        let (particles, lo, hi) = walled_box::<2>(l0, [30, 14], 10);
-        let mut cfg = config::<2>(l0, lo, hi);
-        cfg.rheology = mps_runner::mps::Rheology::Newtonian {
-            viscosity_pa_s: 1e-3,
-        };
-        cfg.pressure_scheme = PressureScheme::Incremental;
-        cfg.pressure_regularisation = beta;
-        let mut solver = Solver::new(cfg, particles);
-        let mut max_speed = 0.0f64;
-        while advance(&mut solver, 2.0) {
-            if solver.time_s >= 0.5 {
-                max_speed = max_speed.max(solver.max_fluid_speed_m_s());
-            }
-        }
-        max_speed
+        still_tank_configured::<2>([30, 14], 10, 2.0, 0.0, |cfg, _| {
+            cfg.pressure_scheme = PressureScheme::Incremental;
+            cfg.pressure_regularisation = beta;
+        })
+        .0
     };
     let with = run(1.0);
     let without = run(0.0);
@@ -327,37 +332,12 @@ fn corrected_velocity_gradient_is_exact_up_to_the_free_surface() {
 /// stays as still.
 #[test]
 fn surface_depth_puts_the_zero_of_pressure_at_the_fill_height() {
-    let l0 = 0.02;
+    // The bottom pressure against the fill height H = y_top + l0/2 either way.
     let run = |depth: f64| {
-        let (particles, lo, hi) = walled_box::<2>(l0, [30, 14], 10);
-        let mut cfg = config::<2>(l0, lo, hi);
-        cfg.rheology = mps_runner::mps::Rheology::Newtonian {
-            viscosity_pa_s: 1e-3,
-        };
-        cfg.pressure_scheme = PressureScheme::Incremental;
-        cfg.surface_depth_m = depth * l0;
-        let mut solver = Solver::new(cfg, particles);
-        let top = (0..solver.particles.len())
-            .filter(|&i| solver.particles.kind[i] == ParticleKind::Fluid)
-            .map(|i| solver.particles.position_m[i][1])
-            .fold(f64::MIN, f64::max);
-        let mut max_speed = 0.0f64;
-        while advance(&mut solver, 2.0) {
-            if solver.time_s >= 0.5 {
-                max_speed = max_speed.max(solver.max_fluid_speed_m_s());
-            }
-        }
-        let p = &solver.particles;
-        let bottom: Vec<usize> = (0..p.len())
-            .filter(|&i| p.kind[i] == ParticleKind::Fluid && p.position_m[i][1] < 0.75 * l0)
-            .collect();
-        let fill_height = top + 0.5 * l0;
-        let measured: f64 = bottom.iter().map(|&i| p.pressure_pa[i]).sum();
-        let expected: f64 = bottom
-            .iter()
-            .map(|&i| 1000.0 * 9.81 * (fill_height - p.position_m[i][1]))
-            .sum();
-        (max_speed, measured / expected - 1.0)
+        still_tank_configured::<2>([30, 14], 10, 2.0, 0.5, |cfg, l0| {
+            cfg.pressure_scheme = PressureScheme::Incremental;
+            cfg.surface_depth_m = depth * l0;
+        })
     };
     let (speed, error) = run(0.5);
     let (speed_at_centres, error_at_centres) = run(0.0);

@@ -50,29 +50,26 @@ pub fn canonical_text<S: SceneSection>(manifest: &Manifest<S>) -> String {
     }
     if let Some(mps) = value.get_mut("mps").and_then(Value::as_object_mut) {
         // Off (0) is the behaviour before the fields existed; the standard scheme reads
-        // neither.
+        // none of them.
         for (key, v) in [
             ("pair_stabilisation", manifest.mps.pair_stabilisation),
             ("wall_support", manifest.mps.wall_support),
+            (
+                "pressure_regularisation",
+                manifest.mps.pressure_regularisation,
+            ),
+            ("surface_depth", manifest.mps.surface_depth),
         ] {
             if v == 0.0 || manifest.mps.pressure_scheme == PressureSchemeName::Standard {
                 mps.remove(key);
             }
         }
-        if manifest.mps.surface_depth == 0.0
-            || manifest.mps.pressure_scheme == PressureSchemeName::Standard
-        {
-            mps.remove("surface_depth");
+        // The radius is read only with the regularisation on.
+        if !mps.contains_key("pressure_regularisation") {
+            mps.remove("regularisation_radius");
         }
         if !manifest.mps.corrected_strain_rate {
             mps.remove("corrected_strain_rate");
-        }
-        // The radius is read only with the regularisation on.
-        if manifest.mps.pressure_regularisation == 0.0
-            || manifest.mps.pressure_scheme == PressureSchemeName::Standard
-        {
-            mps.remove("pressure_regularisation");
-            mps.remove("regularisation_radius");
         }
     }
     for (section, key) in [

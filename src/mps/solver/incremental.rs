@@ -31,7 +31,7 @@
 use super::{PARTICLES_PER_TASK, ParticleKind, PressureScheme, SolveReport, Solver, StepError};
 use crate::mps::kernel::weight;
 use crate::mps::operators::{
-    MIN_DET_RATIO, corrected_gradient, divergence, gradient_correction, moment_matrix,
+    MIN_DET_RATIO, corrected_gradient, divergence, gradient, gradient_correction, moment_matrix,
 };
 use crate::mps::particles::Vector;
 use nalgebra::SMatrix;
@@ -131,9 +131,10 @@ impl<const D: usize> Solver<D> {
         let p = &self.particles;
         let is_fluid = |i: usize| p.kind[i] == ParticleKind::Fluid;
         // Fluid below the threshold is on the surface: its increment is known, p_s - p^n (so
-        // that p^(n+1) = p_s, 0 unless `surface_depth_m` is on). The other fluid particles are the unknowns. Walls have none: the
-        // increment's normal derivative is zero there (measured: with walls as unknowns, as
-        // in the standard scheme, the tank at rest diverges within 3 s at dt/2).
+        // that p^(n+1) = p_s, 0 unless `surface_depth_m` is on). The other fluid particles
+        // are the unknowns. Walls have none: the increment's normal derivative is zero there
+        // (measured: with walls as unknowns, as in the standard scheme, the tank at rest
+        // diverges within 3 s at dt/2).
         let threshold = c.surface_threshold * refs.n0;
         let surface: Vec<bool> = (0..p.len())
             .map(|i| is_fluid(i) && number_density[i] < threshold)
@@ -317,26 +318,27 @@ impl<const D: usize> Solver<D> {
     /// them: measured, a 6 x 60 column of water at 10 mm blows up within 0.6 s without it.
     fn regularisation(&self, i: usize, pi: f64) -> Vector<D> {
         let beta = self.config.pressure_regularisation;
-        let mut sum = Vector::<D>::zeros();
+        if beta <= 0.0 {
+            return Vector::<D>::zeros();
+        }
         // Measured from a flat surface's value, so that the surface row (incomplete shell)
         // feels none of it.
         let pi =
             pi - self.config.density_kg_m3 * self.gravity().norm() * self.config.surface_depth_m;
-        if beta <= 0.0 || pi <= 0.0 {
-            return sum;
+        if pi <= 0.0 {
+            return Vector::<D>::zeros();
         }
+        // (d/n0) sum_j r_ij w/r^2 is the gradient model of the constant 1.
         let p = &self.particles;
-        let nb = &self.pairs.near;
         let radius = self.config.regularisation_radius_m;
-        for &j in nb.of(i) {
-            let r = nb.displacement(&p.position_m, i, j as usize);
-            let r2 = r.norm_squared();
-            let w = weight(r2.sqrt(), radius);
-            if w > 0.0 {
-                sum += r * (w / r2);
-            }
-        }
-        sum * (beta * pi * D as f64 / self.refs.n0)
+        gradient(
+            &p.position_m,
+            &self.pairs.near,
+            i,
+            radius,
+            self.refs.n0,
+            |_| Some(1.0),
+        ) * (beta * pi)
     }
 
     /// The pressure each free-surface particle holds (0 elsewhere): rho |g| surface_depth_m
