@@ -43,7 +43,7 @@ pub fn gradient<const D: usize>(
 /// `difference(j, r_ij)` giving phi_j - phi_i (None skips j): the sum both gradient models
 /// normalise.
 #[inline]
-fn difference_sum<const D: usize>(
+pub(crate) fn difference_sum<const D: usize>(
     positions: &[Vector<D>],
     nb: &Neighbours,
     i: usize,

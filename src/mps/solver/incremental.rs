@@ -31,7 +31,8 @@
 use super::{PARTICLES_PER_TASK, ParticleKind, PressureScheme, SolveReport, Solver, StepError};
 use crate::mps::kernel::weight;
 use crate::mps::operators::{
-    MIN_DET_RATIO, corrected_gradient, divergence, gradient, gradient_correction, moment_matrix,
+    MIN_DET_RATIO, corrected_gradient, difference_sum, divergence, gradient_correction,
+    moment_matrix,
 };
 use crate::mps::particles::Vector;
 use nalgebra::SMatrix;
@@ -328,17 +329,11 @@ impl<const D: usize> Solver<D> {
         if pi <= 0.0 {
             return Vector::<D>::zeros();
         }
-        // (d/n0) sum_j r_ij w/r^2 is the gradient model of the constant 1.
+        // sum_j r_ij w/r^2: the gradient model's sum for the constant 1.
         let p = &self.particles;
         let radius = self.config.regularisation_radius_m;
-        gradient(
-            &p.position_m,
-            &self.pairs.near,
-            i,
-            radius,
-            self.refs.n0,
-            |_| Some(1.0),
-        ) * (beta * pi)
+        difference_sum(&p.position_m, &self.pairs.near, i, radius, |_, _| Some(1.0))
+            * (beta * pi * D as f64 / self.refs.n0)
     }
 
     /// The pressure each free-surface particle holds (0 elsewhere): rho |g| surface_depth_m
