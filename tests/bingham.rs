@@ -49,6 +49,7 @@ fn bingham_poiseuille(
         tolerance: 1e-12,
         max_iterations: 10_000,
         corrected_gradient: false,
+        wall_surface_m: None,
     };
     let force = Vector::<2>::new(g_pa_m / rho, 0.0);
     let dt_s = 0.05;

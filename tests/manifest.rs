@@ -701,17 +701,22 @@ fn invalid_values_are_named_and_located() {
         ],
     );
     assert_ne!(plain.hash_hex, on.hash_hex);
-    // surface_depth and corrected_strain_rate likewise.
+    // surface_depth, corrected_strain_rate and wall_surface_no_slip likewise.
     let off = ok_with(
         MINIMAL,
         &[
             "mps.pressure_scheme=incremental",
             "mps.surface_depth=0",
             "mps.corrected_strain_rate=false",
+            "mps.wall_surface_no_slip=false",
         ],
     );
     assert_eq!(plain.hash_hex, off.hash_hex);
-    for on in ["mps.surface_depth=0.5", "mps.corrected_strain_rate=true"] {
+    for on in [
+        "mps.surface_depth=0.5",
+        "mps.corrected_strain_rate=true",
+        "mps.wall_surface_no_slip=true",
+    ] {
         let on = ok_with(MINIMAL, &["mps.pressure_scheme=incremental", on]);
         assert_ne!(plain.hash_hex, on.hash_hex);
     }

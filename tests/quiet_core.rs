@@ -310,8 +310,8 @@ fn corrected_velocity_gradient_is_exact_up_to_the_free_surface() {
         .collect();
     assert!(top.len() >= 4);
     for &i in &top {
-        let corrected = velocity_gradient(&p, &nb, &refs, i, true);
-        let plain = velocity_gradient(&p, &nb, &refs, i, false);
+        let corrected = velocity_gradient(&p, &nb, &refs, i, true, None);
+        let plain = velocity_gradient(&p, &nb, &refs, i, false, None);
         assert!(
             (corrected[(0, 1)] - shear).abs() < 1e-9 * shear && corrected[(1, 0)].abs() < 1e-9,
             "corrected du/dy {} at the surface, expected {shear}",
@@ -348,4 +348,67 @@ fn surface_depth_puts_the_zero_of_pressure_at_the_fill_height() {
     assert!(error.abs() < 0.002, "bottom pressure error {error:.4}");
     // At the centres the bottom row is short by l0/(2 (H - y)): 10 rows, 5.3 %.
     assert!(error_at_centres < -0.04, "{error_at_centres:.4}");
+}
+
+/// No slip at the walls' surface (`mps.wall_surface_no_slip`): for simple shear u = (a y, 0)
+/// with y from the floor's surface (half a spacing above the wall row) and the walls at rest,
+/// the velocity extrapolated through the surface makes the strain rate's gradient exact at
+/// every row next to the floor, plain or corrected. With the walls' own velocity (zero, at
+/// their centres) the bottom row's shear is short.
+#[test]
+fn wall_surface_no_slip_makes_the_shear_exact_next_to_the_floor() {
+    use mps_runner::mps::Particles;
+    use mps_runner::mps::kernel::RefValues;
+    use mps_runner::mps::viscosity::velocity_gradient;
+    let l0 = 0.01;
+    let refs = RefValues::on_lattice::<2>(l0, 2.1 * l0, 3.1 * l0);
+    let shear = 2.0;
+    let columns = 14;
+    let mut p = Particles::<2>::default();
+    // Fluid rows at (k + 1/2) l0 above the surface y = 0; wall row and two dummy rows below.
+    for row in -3i32..6 {
+        for column in 0..columns {
+            let x = Vector::<2>::new(column as f64 * l0, (f64::from(row) + 0.5) * l0);
+            let kind = match row {
+                -1 => ParticleKind::Wall,
+                r if r < -1 => ParticleKind::Dummy,
+                _ => ParticleKind::Fluid,
+            };
+            p.push(x, kind);
+        }
+    }
+    for i in 0..p.len() {
+        if p.kind[i] == ParticleKind::Fluid {
+            p.velocity_m_s[i] = Vector::<2>::new(shear * p.position_m[i][1], 0.0);
+        }
+    }
+    let nb = Neighbours::build(&p.position_m, refs.radius_n_m);
+    let interior = |i: usize| {
+        let x = p.position_m[i];
+        p.kind[i] == ParticleKind::Fluid
+            && x[0] > 3.0 * l0
+            && x[0] < (columns - 4) as f64 * l0
+            && x[1] < 3.0 * l0
+    };
+    let near_floor: Vec<usize> = (0..p.len()).filter(|&i| interior(i)).collect();
+    assert_eq!(near_floor.len(), 3 * (columns - 8));
+    for &i in &near_floor {
+        for corrected in [false, true] {
+            let g = velocity_gradient(&p, &nb, &refs, i, corrected, Some(0.5 * l0));
+            assert!(
+                (g[(0, 1)] - shear).abs() < 1e-9 * shear && g[(1, 0)].abs() < 1e-9,
+                "du/dy {} at y = {}, expected {shear} (corrected {corrected})",
+                g[(0, 1)],
+                p.position_m[i][1]
+            );
+        }
+    }
+    // The bottom row with the walls' own velocity: they sit at u = 0 instead of -a l0/2.
+    let bottom = near_floor
+        .iter()
+        .copied()
+        .find(|&i| p.position_m[i][1] < l0)
+        .unwrap();
+    let own = velocity_gradient(&p, &nb, &refs, bottom, false, None);
+    assert!(own[(0, 1)] < 0.85 * shear, "du/dy {} with own velocity", own[(0, 1)]);
 }

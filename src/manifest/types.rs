@@ -247,6 +247,12 @@ pub struct Mps {
     /// gradient model, which is short by up to half near the free surface and walls.
     #[serde(default)]
     pub corrected_strain_rate: bool,
+    /// The no-slip condition at the walls' surface, half a spacing in front of their first
+    /// row, instead of at the wall particles: in the viscous term and the strain rate a wall
+    /// or dummy neighbour's velocity is extrapolated linearly through that surface (Morris,
+    /// Fox & Zhu 1997). Without it a sheared layer slips by half a spacing at the floor.
+    #[serde(default)]
+    pub wall_surface_no_slip: bool,
     /// Artificial compressibility on the PPE diagonal, in 1/Pa.
     #[serde(default = "default_compressibility_1_pa")]
     pub compressibility_1_pa: f64,
@@ -308,6 +314,7 @@ impl Default for Mps {
             regularisation_radius: default_regularisation_radius(),
             surface_depth: 0.0,
             corrected_strain_rate: false,
+            wall_surface_no_slip: false,
             ppe_preconditioner: PpePreconditioner::default(),
             compressibility_1_pa: default_compressibility_1_pa(),
             collision_distance: default_collision_distance(),

@@ -63,6 +63,9 @@ pub struct SolverConfig<const D: usize> {
     pub surface_depth_m: f64,
     /// Strain rate from the corrected velocity gradient (corrective matrix).
     pub corrected_strain_rate: bool,
+    /// No-slip at the walls' surface, not at the wall particles (see
+    /// [`crate::mps::viscosity::ViscousSettings::wall_surface_m`]).
+    pub wall_surface_no_slip: bool,
     /// Aggregation multigrid instead of Jacobi as the PPE preconditioner.
     pub multigrid_ppe: bool,
     pub compressibility_1_pa: f64,
@@ -357,6 +360,7 @@ impl<const D: usize> Solver<D> {
             tolerance: c.viscosity_tolerance,
             max_iterations: c.viscosity_max_iterations,
             corrected_gradient: c.corrected_strain_rate,
+            wall_surface_m: c.wall_surface_no_slip.then_some(0.5 * c.spacing_m),
         }
     }
 

@@ -21,6 +21,70 @@ pub struct ViscousSettings {
     pub max_iterations: u32,
     /// Velocity gradient with the corrective matrix (see [`velocity_gradient`]).
     pub corrected_gradient: bool,
+    /// Where the no-slip condition holds: `None` at the wall and dummy particles (they carry
+    /// their own velocity); `Some(s)` at the walls' surface, s in front of the nearest wall
+    /// particle (half a spacing on a lattice), see [`WallFrame`].
+    pub wall_surface_m: Option<f64>,
+}
+
+/// The walls seen from fluid particle i, for a no-slip condition at the walls' surface:
+/// the unit normal into the walls and i's distance to their surface. A wall or dummy
+/// neighbour j at distance d_j beyond the surface then carries the linear extrapolation
+/// u_w + (u_w - u_i) d_j/d_i of i's velocity through the surface (Morris, Fox & Zhu 1997,
+/// with the surface found from the neighbours, so any wall shape works), i.e. its pair term
+/// (u_j - u_i) becomes (1 + d_j/d_i)(u_w - u_i).
+#[derive(Debug, Clone, Copy)]
+pub struct WallFrame<const D: usize> {
+    normal: Vector<D>,
+    gap_m: f64,
+}
+
+impl<const D: usize> WallFrame<D> {
+    /// The frame of fluid particle i from its non-fluid neighbours within `radius_m` (normal:
+    /// their weighted mean direction; surface: `surface_m` in front of the nearest one along
+    /// it). `None` without wall neighbours. The gap is at least half `surface_m`, so that a
+    /// particle pushed against a wall keeps a bounded coupling.
+    pub fn of(
+        p: &Particles<D>,
+        nb: &Neighbours,
+        i: usize,
+        radius_m: f64,
+        surface_m: f64,
+    ) -> Option<Self> {
+        let mut sum = Vector::<D>::zeros();
+        for &j in nb.of(i) {
+            let j = j as usize;
+            if p.kind[j] != ParticleKind::Fluid {
+                let r = nb.displacement(&p.position_m, i, j);
+                sum += r * weight(r.norm(), radius_m);
+            }
+        }
+        let length = sum.norm();
+        if length == 0.0 {
+            return None;
+        }
+        let normal = sum / length;
+        let mut nearest = f64::INFINITY;
+        for &j in nb.of(i) {
+            let j = j as usize;
+            if p.kind[j] != ParticleKind::Fluid {
+                let r = nb.displacement(&p.position_m, i, j);
+                if weight(r.norm(), radius_m) > 0.0 {
+                    nearest = nearest.min(r.dot(&normal));
+                }
+            }
+        }
+        Some(Self {
+            normal,
+            gap_m: (nearest - surface_m).max(0.5 * surface_m),
+        })
+    }
+
+    /// 1 + d_j/d_i for a wall or dummy neighbour at displacement r_ij (1 for one in front of
+    /// the surface).
+    pub fn factor(&self, r_ij: &Vector<D>) -> f64 {
+        1.0 + ((r_ij.dot(&self.normal) - self.gap_m) / self.gap_m).max(0.0)
+    }
 }
 
 /// Result of the viscous stage.
@@ -47,8 +111,10 @@ pub fn velocity_gradient<const D: usize>(
     refs: &RefValues,
     i: usize,
     corrected: bool,
+    wall_surface_m: Option<f64>,
 ) -> SMatrix<f64, D, D> {
     let ui = p.velocity_m_s[i];
+    let frame = wall_surface_m.and_then(|s| WallFrame::of(p, nb, i, refs.radius_n_m, s));
     let mut g = SMatrix::<f64, D, D>::zeros();
     let mut m = SMatrix::<f64, D, D>::zeros();
     for &j in nb.of(i) {
@@ -59,7 +125,11 @@ pub fn velocity_gradient<const D: usize>(
         if w == 0.0 {
             continue;
         }
-        g += (p.velocity_m_s[j] - ui) * (r.transpose() * (w / r2));
+        let du = match frame {
+            Some(f) if p.kind[j] != ParticleKind::Fluid => (p.velocity_m_s[j] - ui) * f.factor(&r),
+            _ => p.velocity_m_s[j] - ui,
+        };
+        g += du * (r.transpose() * (w / r2));
         if corrected {
             m += r * r.transpose() * (w / r2);
         }
@@ -116,6 +186,7 @@ pub fn predict_velocity<const D: usize>(
                     refs,
                     i,
                     settings.corrected_gradient,
+                    settings.wall_surface_m,
                 ))
             } else {
                 0.0
@@ -176,15 +247,20 @@ pub fn predict_velocity<const D: usize>(
         };
         let mut diag = scale;
         let mut boundary = Vector::<D>::zeros();
+        let frame = settings
+            .wall_surface_m
+            .and_then(|s| WallFrame::of(p, nb, i, refs.radius_lap_m, s));
         for &j in nb.of(i) {
             let j = j as usize;
-            let a = coef
-                * weight(
-                    nb.displacement(&p.position_m, i, j).norm(),
-                    refs.radius_lap_m,
-                );
+            let r = nb.displacement(&p.position_m, i, j);
+            let mut a = coef * weight(r.norm(), refs.radius_lap_m);
             if a == 0.0 {
                 continue;
+            }
+            if let Some(f) = &frame
+                && !is_fluid(j)
+            {
+                a *= f.factor(&r);
             }
             let c = if divergence_form {
                 let mu_ij = if is_fluid(j) {
