@@ -48,7 +48,7 @@ fn bingham_poiseuille(
         stress_gradient_term,
         tolerance: 1e-12,
         max_iterations: 10_000,
-        corrected_gradient: false,
+        gradient: mps_runner::mps::viscosity::StrainRateGradient::Plain,
         wall_surface_m: None,
     };
     let force = Vector::<2>::new(g_pa_m / rho, 0.0);

@@ -126,10 +126,15 @@ fn no_slip_at_the_wall_surface_gives_the_half_poiseuille_speed_of_the_nominal_de
         text.find("\nfluid:").unwrap(),
         text.find("\n# The dam break").unwrap(),
     );
-    let newtonian = "\nfluid:\n  model: newtonian\n  density_kg_m3: 2300.0\n  viscosity_pa_s: 50.0\n";
+    let newtonian =
+        "\nfluid:\n  model: newtonian\n  density_kg_m3: 2300.0\n  viscosity_pa_s: 50.0\n";
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("inclined_newtonian.yaml");
-    std::fs::write(&path, format!("{}{}{}", &text[..start], newtonian, &text[end..])).unwrap();
+    std::fs::write(
+        &path,
+        format!("{}{}{}", &text[..start], newtonian, &text[end..]),
+    )
+    .unwrap();
     let mean_plug = |surface: bool| {
         let sets: Vec<String> = [
             "spacing_m=0.01",
@@ -159,14 +164,20 @@ fn no_slip_at_the_wall_surface_gives_the_half_poiseuille_speed_of_the_nominal_de
     let (h, mu) = (0.1, 50.0);
     let nominal = driving_pa_m() * h * h / (2.0 * mu);
     let (surface, closed) = mean_plug(true);
-    assert!((closed / nominal - 1.0).abs() < 1e-12, "{closed} vs {nominal}");
+    assert!(
+        (closed / nominal - 1.0).abs() < 1e-12,
+        "{closed} vs {nominal}"
+    );
     assert!(
         (surface / nominal - 1.0).abs() < 0.02,
         "plug {surface} m/s with no slip at the wall surface, half Poiseuille {nominal} m/s"
     );
     // The wall particles' own velocity: the layer shears as one l0/2 deeper, +10 % here.
     let (own, _) = mean_plug(false);
-    assert!(own / nominal - 1.0 > 0.08, "plug {own} m/s without the switch");
+    assert!(
+        own / nominal - 1.0 > 0.08,
+        "plug {own} m/s without the switch"
+    );
 }
 
 #[test]

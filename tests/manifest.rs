@@ -709,6 +709,7 @@ fn invalid_values_are_named_and_located() {
             "mps.surface_depth=0",
             "mps.corrected_strain_rate=false",
             "mps.wall_surface_no_slip=false",
+            "mps.quadratic_strain_rate=false",
         ],
     );
     assert_eq!(plain.hash_hex, off.hash_hex);
@@ -716,12 +717,22 @@ fn invalid_values_are_named_and_located() {
         "mps.surface_depth=0.5",
         "mps.corrected_strain_rate=true",
         "mps.wall_surface_no_slip=true",
+        "mps.quadratic_strain_rate=true",
     ] {
         let on = ok_with(MINIMAL, &["mps.pressure_scheme=incremental", on]);
         assert_ne!(plain.hash_hex, on.hash_hex);
     }
     let e = err_with(MINIMAL, &["mps.surface_depth=1.5"]);
     assert_invalid(&e, "mps.surface_depth", None, &["[0, 1]", "1.5"]);
+    // Two estimates of the strain rate: one at a time.
+    let e = err_with(
+        MINIMAL,
+        &[
+            "mps.corrected_strain_rate=true",
+            "mps.quadratic_strain_rate=true",
+        ],
+    );
+    assert_invalid(&e, "mps.quadratic_strain_rate", None, &["set one of them"]);
 
     // from an override: no line, says so
     let e = err_with(MINIMAL, &["time.courant=1.5"]);

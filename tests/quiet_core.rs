@@ -283,7 +283,7 @@ fn pressure_regularisation_keeps_the_still_tank() {
 fn corrected_velocity_gradient_is_exact_up_to_the_free_surface() {
     use mps_runner::mps::Particles;
     use mps_runner::mps::kernel::RefValues;
-    use mps_runner::mps::viscosity::velocity_gradient;
+    use mps_runner::mps::viscosity::{StrainRateGradient, velocity_gradient};
     let l0 = 0.01;
     let refs = RefValues::on_lattice::<2>(l0, 2.1 * l0, 3.1 * l0);
     let shear = 3.0;
@@ -310,8 +310,8 @@ fn corrected_velocity_gradient_is_exact_up_to_the_free_surface() {
         .collect();
     assert!(top.len() >= 4);
     for &i in &top {
-        let corrected = velocity_gradient(&p, &nb, &refs, i, true, None);
-        let plain = velocity_gradient(&p, &nb, &refs, i, false, None);
+        let corrected = velocity_gradient(&p, &nb, &refs, i, StrainRateGradient::Corrected, None);
+        let plain = velocity_gradient(&p, &nb, &refs, i, StrainRateGradient::Plain, None);
         assert!(
             (corrected[(0, 1)] - shear).abs() < 1e-9 * shear && corrected[(1, 0)].abs() < 1e-9,
             "corrected du/dy {} at the surface, expected {shear}",
@@ -359,7 +359,7 @@ fn surface_depth_puts_the_zero_of_pressure_at_the_fill_height() {
 fn wall_surface_no_slip_makes_the_shear_exact_next_to_the_floor() {
     use mps_runner::mps::Particles;
     use mps_runner::mps::kernel::RefValues;
-    use mps_runner::mps::viscosity::velocity_gradient;
+    use mps_runner::mps::viscosity::{StrainRateGradient, velocity_gradient};
     let l0 = 0.01;
     let refs = RefValues::on_lattice::<2>(l0, 2.1 * l0, 3.1 * l0);
     let shear = 2.0;
@@ -393,11 +393,15 @@ fn wall_surface_no_slip_makes_the_shear_exact_next_to_the_floor() {
     let near_floor: Vec<usize> = (0..p.len()).filter(|&i| interior(i)).collect();
     assert_eq!(near_floor.len(), 3 * (columns - 8));
     for &i in &near_floor {
-        for corrected in [false, true] {
-            let g = velocity_gradient(&p, &nb, &refs, i, corrected, Some(0.5 * l0));
+        for model in [
+            StrainRateGradient::Plain,
+            StrainRateGradient::Corrected,
+            StrainRateGradient::Quadratic,
+        ] {
+            let g = velocity_gradient(&p, &nb, &refs, i, model, Some(0.5 * l0));
             assert!(
                 (g[(0, 1)] - shear).abs() < 1e-9 * shear && g[(1, 0)].abs() < 1e-9,
-                "du/dy {} at y = {}, expected {shear} (corrected {corrected})",
+                "du/dy {} at y = {}, expected {shear} ({model:?})",
                 g[(0, 1)],
                 p.position_m[i][1]
             );
@@ -409,6 +413,87 @@ fn wall_surface_no_slip_makes_the_shear_exact_next_to_the_floor() {
         .copied()
         .find(|&i| p.position_m[i][1] < l0)
         .unwrap();
-    let own = velocity_gradient(&p, &nb, &refs, bottom, false, None);
-    assert!(own[(0, 1)] < 0.85 * shear, "du/dy {} with own velocity", own[(0, 1)]);
+    let own = velocity_gradient(&p, &nb, &refs, bottom, StrainRateGradient::Plain, None);
+    assert!(
+        own[(0, 1)] < 0.85 * shear,
+        "du/dy {} with own velocity",
+        own[(0, 1)]
+    );
+}
+
+/// The quadratic fit (`mps.quadratic_strain_rate`) reads a parabolic shear profile exactly at
+/// every row, the one next to the floor (through the no-slip point on the walls' surface) and
+/// the free-surface row included: a sheared zone one or two spacings thick (a yield-stress
+/// layer near rest) is not read as the secant slope over the stencil. The corrected gradient
+/// model, exact for linear fields only, is off at the floor and at the surface.
+#[test]
+fn quadratic_strain_rate_is_exact_for_a_parabolic_profile_from_floor_to_surface() {
+    use mps_runner::mps::Particles;
+    use mps_runner::mps::kernel::RefValues;
+    use mps_runner::mps::viscosity::{StrainRateGradient, velocity_gradient};
+    let l0 = 0.01;
+    let refs = RefValues::on_lattice::<2>(l0, 2.1 * l0, 3.1 * l0);
+    let (columns, rows) = (14, 5);
+    let depth = rows as f64 * l0;
+    // u = a y - a y^2 / (2 h): zero at the floor's surface, zero slope at the layer's top.
+    let a = 3.0;
+    let profile = |y: f64| a * y - a * y * y / (2.0 * depth);
+    let slope = |y: f64| a - a * y / depth;
+    let mut p = Particles::<2>::default();
+    for row in -3i32..rows {
+        for column in 0..columns {
+            let x = Vector::<2>::new(column as f64 * l0, (f64::from(row) + 0.5) * l0);
+            let kind = match row {
+                -1 => ParticleKind::Wall,
+                r if r < -1 => ParticleKind::Dummy,
+                _ => ParticleKind::Fluid,
+            };
+            p.push(x, kind);
+        }
+    }
+    for i in 0..p.len() {
+        if p.kind[i] == ParticleKind::Fluid {
+            p.velocity_m_s[i] = Vector::<2>::new(profile(p.position_m[i][1]), 0.0);
+        }
+    }
+    let nb = Neighbours::build(&p.position_m, refs.radius_n_m);
+    let middle: Vec<usize> = (0..p.len())
+        .filter(|&i| {
+            let x = p.position_m[i];
+            p.kind[i] == ParticleKind::Fluid && x[0] > 3.0 * l0 && x[0] < (columns - 4) as f64 * l0
+        })
+        .collect();
+    assert_eq!(middle.len(), rows as usize * (columns - 8));
+    let mut worst_corrected = 0.0f64;
+    for &i in &middle {
+        let y = p.position_m[i][1];
+        let q = velocity_gradient(
+            &p,
+            &nb,
+            &refs,
+            i,
+            StrainRateGradient::Quadratic,
+            Some(0.5 * l0),
+        );
+        assert!(
+            (q[(0, 1)] - slope(y)).abs() < 1e-9 * a && q[(1, 0)].abs() < 1e-9 * a,
+            "quadratic du/dy {} at y = {y}, exact {}",
+            q[(0, 1)],
+            slope(y)
+        );
+        let c = velocity_gradient(
+            &p,
+            &nb,
+            &refs,
+            i,
+            StrainRateGradient::Corrected,
+            Some(0.5 * l0),
+        );
+        worst_corrected = worst_corrected.max((c[(0, 1)] - slope(y)).abs() / a);
+    }
+    // The bottom row: the linear extrapolation through the wall reads the secant u_0/d_0.
+    assert!(
+        worst_corrected > 0.05,
+        "corrected off by {worst_corrected} of a at worst"
+    );
 }

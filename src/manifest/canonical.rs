@@ -8,7 +8,8 @@
 //! (`mps.ppe_preconditioner: jacobi`, `mps.pressure_scheme: standard` with
 //! `mps.compression_relaxation`, `mps.pair_stabilisation`, `mps.wall_support` and
 //! `mps.pressure_regularisation` (with `mps.regularisation_radius`) and `mps.surface_depth`
-//! at 0 (and under the standard scheme), `mps.corrected_strain_rate` and `mps.wall_surface_no_slip` false, `stop.rest_*` without `stop.rest_metric`, null
+//! at 0 (and under the standard scheme), `mps.corrected_strain_rate`, `mps.wall_surface_no_slip` and
+//! `mps.quadratic_strain_rate` false, `stop.rest_*` without `stop.rest_metric`, null
 //! `mps.wall_collision_*`, `time.dt_min_s` and `stop.max_ghost_particles`, an empty
 //! `boundaries` section), so every experiment keeps the hash it had before they existed and
 //! files written then still verify. JSON is YAML, so the canonical text loads back through
@@ -73,6 +74,9 @@ pub fn canonical_text<S: SceneSection>(manifest: &Manifest<S>) -> String {
         }
         if !manifest.mps.wall_surface_no_slip {
             mps.remove("wall_surface_no_slip");
+        }
+        if !manifest.mps.quadratic_strain_rate {
+            mps.remove("quadratic_strain_rate");
         }
     }
     for (section, key) in [

@@ -253,6 +253,12 @@ pub struct Mps {
     /// Fox & Zhu 1997). Without it a sheared layer slips by half a spacing at the floor.
     #[serde(default)]
     pub wall_surface_no_slip: bool,
+    /// The strain rate's velocity gradient from a weighted least-squares fit of a quadratic
+    /// velocity field over the neighbours (exact for a parabolic profile: a sheared zone one
+    /// or two spacings thick), instead of the gradient model. Not with
+    /// `corrected_strain_rate`.
+    #[serde(default)]
+    pub quadratic_strain_rate: bool,
     /// Artificial compressibility on the PPE diagonal, in 1/Pa.
     #[serde(default = "default_compressibility_1_pa")]
     pub compressibility_1_pa: f64,
@@ -315,6 +321,7 @@ impl Default for Mps {
             surface_depth: 0.0,
             corrected_strain_rate: false,
             wall_surface_no_slip: false,
+            quadratic_strain_rate: false,
             ppe_preconditioner: PpePreconditioner::default(),
             compressibility_1_pa: default_compressibility_1_pa(),
             collision_distance: default_collision_distance(),

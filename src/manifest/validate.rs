@@ -211,6 +211,13 @@ pub fn check<S: SceneSection>(m: &Manifest<S>) -> Vec<Issue> {
             ),
         );
     }
+    if p.quadratic_strain_rate && p.corrected_strain_rate {
+        c.fail(
+            "mps.quadratic_strain_rate",
+            "and mps.corrected_strain_rate are two estimates of the strain rate: set one of them"
+                .to_string(),
+        );
+    }
     // The regularisation sums over the number-density neighbour lists.
     if nd_ok && reg_ok && p.regularisation_radius > p.number_density_radius {
         c.fail(

@@ -10,7 +10,7 @@ use super::pressure::{CsrMatrix, Preconditioner, SolveReport, solve_pcg};
 use super::reduce::PARTICLES_PER_TASK;
 use super::reduce::max_by;
 use super::rheology::Rheology;
-use super::viscosity::{ViscousSettings, predict_velocity};
+use super::viscosity::{StrainRateGradient, ViscousSettings, predict_velocity};
 use rayon::prelude::*;
 use std::time::Instant;
 
@@ -66,6 +66,8 @@ pub struct SolverConfig<const D: usize> {
     /// No-slip at the walls' surface, not at the wall particles (see
     /// [`crate::mps::viscosity::ViscousSettings::wall_surface_m`]).
     pub wall_surface_no_slip: bool,
+    /// Strain rate from the quadratic least-squares fit (over `corrected_strain_rate`).
+    pub quadratic_strain_rate: bool,
     /// Aggregation multigrid instead of Jacobi as the PPE preconditioner.
     pub multigrid_ppe: bool,
     pub compressibility_1_pa: f64,
@@ -359,7 +361,13 @@ impl<const D: usize> Solver<D> {
             stress_gradient_term: c.stress_gradient_term,
             tolerance: c.viscosity_tolerance,
             max_iterations: c.viscosity_max_iterations,
-            corrected_gradient: c.corrected_strain_rate,
+            gradient: if c.quadratic_strain_rate {
+                StrainRateGradient::Quadratic
+            } else if c.corrected_strain_rate {
+                StrainRateGradient::Corrected
+            } else {
+                StrainRateGradient::Plain
+            },
             wall_surface_m: c.wall_surface_no_slip.then_some(0.5 * c.spacing_m),
         }
     }

@@ -19,12 +19,25 @@ pub struct ViscousSettings {
     pub stress_gradient_term: bool,
     pub tolerance: f64,
     pub max_iterations: u32,
-    /// Velocity gradient with the corrective matrix (see [`velocity_gradient`]).
-    pub corrected_gradient: bool,
+    /// How the strain rate's velocity gradient is estimated (see [`velocity_gradient`]).
+    pub gradient: StrainRateGradient,
     /// Where the no-slip condition holds: `None` at the wall and dummy particles (they carry
     /// their own velocity); `Some(s)` at the walls' surface, s in front of the nearest wall
     /// particle (half a spacing on a lattice), see [`WallFrame`].
     pub wall_surface_m: Option<f64>,
+}
+
+/// The velocity gradient model of the strain rate.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum StrainRateGradient {
+    /// The MPS gradient model normalised by d/n0 (seed 000 eqs. 12-13).
+    Plain,
+    /// Normalised by the corrective matrix: exact for a linear field on any stencil.
+    Corrected,
+    /// A weighted least-squares fit of a quadratic field: exact for a quadratic one, so that a
+    /// sheared zone one or two spacings thick (a parabolic profile) is not read as the secant
+    /// slope over the stencil.
+    Quadratic,
 }
 
 /// The walls seen from fluid particle i, for a no-slip condition at the walls' surface:
@@ -80,6 +93,11 @@ impl<const D: usize> WallFrame<D> {
         })
     }
 
+    /// The point of the walls' surface nearest to i, relative to i.
+    pub fn surface_point(&self) -> Vector<D> {
+        self.normal * self.gap_m
+    }
+
     /// 1 + d_j/d_i for a wall or dummy neighbour at displacement r_ij (1 for one in front of
     /// the surface).
     pub fn factor(&self, r_ij: &Vector<D>) -> f64 {
@@ -100,21 +118,30 @@ pub struct ViscousStage<const D: usize> {
 
 /// Velocity gradient G_ab = d u_a / d x_b at fluid particle i by the gradient model (eq. 3,
 /// applied to each velocity component as in seed 000 eqs. 12-13); walls and dummies carry
-/// their own velocity, which makes the floor no-slip. `corrected`: the sum is normalised by
-/// the corrective matrix M_i^-1 (Khayyer & Gotoh 2011) instead of d/n0, which makes it exact
-/// for a linear velocity field on a truncated stencil (the free surface: the plain model
-/// gives a flat surface's top row half the shear rate); the uncorrected d/n0 where M_i is
-/// ill-conditioned (a splash).
+/// their own velocity, which makes the floor no-slip at their centres, or with
+/// `wall_surface_m` i's velocity extrapolated through the walls' surface ([`WallFrame`]).
+/// - `Corrected`: the sum is normalised by the corrective matrix M_i^-1 (Khayyer & Gotoh
+///   2011) instead of d/n0, which makes it exact for a linear velocity field on a truncated
+///   stencil (the free surface: the plain model gives a flat surface's top row half the shear
+///   rate); the uncorrected d/n0 where M_i is ill-conditioned (a splash).
+/// - `Quadratic`: see [`quadratic_gradient`]; the corrected model where the fit is
+///   ill-conditioned.
 pub fn velocity_gradient<const D: usize>(
     p: &Particles<D>,
     nb: &Neighbours,
     refs: &RefValues,
     i: usize,
-    corrected: bool,
+    model: StrainRateGradient,
     wall_surface_m: Option<f64>,
 ) -> SMatrix<f64, D, D> {
-    let ui = p.velocity_m_s[i];
     let frame = wall_surface_m.and_then(|s| WallFrame::of(p, nb, i, refs.radius_n_m, s));
+    if model == StrainRateGradient::Quadratic
+        && let Some(g) = quadratic_gradient(p, nb, refs, i, frame.as_ref())
+    {
+        return g;
+    }
+    let corrected = model != StrainRateGradient::Plain;
+    let ui = p.velocity_m_s[i];
     let mut g = SMatrix::<f64, D, D>::zeros();
     let mut m = SMatrix::<f64, D, D>::zeros();
     for &j in nb.of(i) {
@@ -140,6 +167,102 @@ pub fn velocity_gradient<const D: usize>(
         g * (D as f64 / refs.n0)
     }
 }
+
+/// Unknowns of the quadratic fit: D first derivatives and D (D + 1) / 2 second ones; sized
+/// for 3D (a 2D fit pads the rest with identity rows).
+const FIT: usize = 9;
+
+/// The weighted least-squares fit u_j - u_i = G r_ij + (1/2) r_ij^T H r_ij over i's
+/// neighbours (weights w(r_ij), lengths in units of the number-density radius for
+/// conditioning), the gradient G of least-squares MPS to second order (Tamai & Koshizuka
+/// 2014). Wall and dummy neighbours take part with their own velocity, unless `frame` is given:
+/// then they are replaced by one point on the walls' surface carrying the nearest wall's
+/// velocity (no slip there), weighted as the heaviest neighbour, so that a layer sheared next
+/// to a wall is fitted by the parabola through the wall. `None` where the fit is
+/// ill-conditioned (too few neighbours spread in too few directions).
+fn quadratic_gradient<const D: usize>(
+    p: &Particles<D>,
+    nb: &Neighbours,
+    refs: &RefValues,
+    i: usize,
+    frame: Option<&WallFrame<D>>,
+) -> Option<SMatrix<f64, D, D>> {
+    let scale = refs.radius_n_m;
+    let unknowns = D + D * (D + 1) / 2;
+    let ui = p.velocity_m_s[i];
+    let mut normal = SMatrix::<f64, FIT, FIT>::zeros();
+    let mut rhs = SMatrix::<f64, FIT, D>::zeros();
+    let mut add = |r: &Vector<D>, du: &Vector<D>, w: f64| {
+        let s = r / scale;
+        let mut row = [0.0; FIT];
+        row[..D].copy_from_slice(s.as_slice());
+        let mut k = D;
+        for a in 0..D {
+            for b in a..D {
+                row[k] = if a == b {
+                    0.5 * s[a] * s[a]
+                } else {
+                    s[a] * s[b]
+                };
+                k += 1;
+            }
+        }
+        for x in 0..unknowns {
+            for y in 0..unknowns {
+                normal[(x, y)] += w * row[x] * row[y];
+            }
+            for c in 0..D {
+                rhs[(x, c)] += w * row[x] * du[c];
+            }
+        }
+    };
+    let mut heaviest = 0.0f64;
+    let mut wall_velocity = None;
+    let mut nearest_wall = f64::INFINITY;
+    for &j in nb.of(i) {
+        let j = j as usize;
+        let r = nb.displacement(&p.position_m, i, j);
+        let w = weight(r.norm(), refs.radius_n_m);
+        if w == 0.0 {
+            continue;
+        }
+        if frame.is_some() && p.kind[j] != ParticleKind::Fluid {
+            let d = r.norm();
+            if d < nearest_wall {
+                nearest_wall = d;
+                wall_velocity = Some(p.velocity_m_s[j]);
+            }
+            continue;
+        }
+        heaviest = heaviest.max(w);
+        add(&r, &(p.velocity_m_s[j] - ui), w);
+    }
+    if let (Some(f), Some(u_w)) = (frame, wall_velocity) {
+        add(&f.surface_point(), &(u_w - ui), heaviest.max(1.0));
+    }
+    for k in unknowns..FIT {
+        normal[(k, k)] = 1.0;
+    }
+    // Ill-conditioned when a pivot of the factorisation is tiny against the largest diagonal
+    // entry: a fit that would guess a curvature from neighbours on one line.
+    let largest = (0..unknowns).fold(0.0f64, |m, k| m.max(normal[(k, k)]));
+    let cholesky = normal.cholesky()?;
+    let l = cholesky.l_dirty();
+    if (0..unknowns).any(|k| !(l[(k, k)] * l[(k, k)] > MIN_FIT_CONDITION * largest)) {
+        return None;
+    }
+    let solution = cholesky.solve(&rhs);
+    let mut g = SMatrix::<f64, D, D>::zeros();
+    for c in 0..D {
+        for b in 0..D {
+            g[(c, b)] = solution[(b, c)] / scale;
+        }
+    }
+    Some(g)
+}
+
+/// Smallest squared pivot of the quadratic fit, relative to its largest diagonal entry, accepted (see [`quadratic_gradient`]).
+const MIN_FIT_CONDITION: f64 = 1e-6;
 
 /// Pi = 2 e_ij e_ij with e = (G + G^T)/2 (seed 000 eqs. 9-11, full tensor contraction).
 pub fn strain_invariant<const D: usize>(g: &SMatrix<f64, D, D>) -> f64 {
@@ -185,7 +308,7 @@ pub fn predict_velocity<const D: usize>(
                     &pairs.near,
                     refs,
                     i,
-                    settings.corrected_gradient,
+                    settings.gradient,
                     settings.wall_surface_m,
                 ))
             } else {
