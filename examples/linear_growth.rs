@@ -6,7 +6,7 @@
 //!
 //! Usage: cargo run --release --example linear_growth -- [--dim 2|3] [--width CELLS]
 //!        [--depth ROWS] [--spacing M] [--beta B] [--pair D] [--wall W] [--compression G]
-//!        [--iterations N] [--dt S]
+//!        [--iterations N] [--dt S] [--exact 0|1]
 //! Defaults: 2D, 6 cells wide, 30 rows deep, 10 mm, incremental scheme with pair 0.8,
 //! wall 0.95, beta 0, compression 0 (its max(n - n0, 0) has a kink at the lattice, which a
 //! difference quotient would see as a growing mode), 2000 iterations, dt 1e-3 s.
@@ -29,6 +29,7 @@ struct Options {
     compression: f64,
     iterations: usize,
     dt_s: f64,
+    exact: bool,
 }
 
 fn parse() -> Options {
@@ -43,6 +44,7 @@ fn parse() -> Options {
         compression: 0.0,
         iterations: 2000,
         dt_s: 1e-3,
+        exact: false,
     };
     let args: Vec<String> = std::env::args().skip(1).collect();
     for pair in args.chunks(2) {
@@ -65,6 +67,7 @@ fn parse() -> Options {
             "--compression" => o.compression = number(),
             "--iterations" => o.iterations = number() as usize,
             "--dt" => o.dt_s = number(),
+            "--exact" => o.exact = number() != 0.0,
             other => panic!("unknown option {other}"),
         }
     }
@@ -93,6 +96,7 @@ fn growth<const D: usize>(o: &Options) {
     cfg.wall_support_m = o.wall * l0;
     cfg.pressure_regularisation = o.beta;
     cfg.compression_relaxation = o.compression;
+    cfg.exact_projection = o.exact;
     let fluid: Vec<usize> = (0..particles.len())
         .filter(|&i| particles.kind[i] == ParticleKind::Fluid)
         .collect();

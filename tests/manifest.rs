@@ -710,6 +710,7 @@ fn invalid_values_are_named_and_located() {
             "mps.corrected_strain_rate=false",
             "mps.wall_surface_no_slip=false",
             "mps.quadratic_strain_rate=false",
+            "mps.exact_projection=false",
         ],
     );
     assert_eq!(plain.hash_hex, off.hash_hex);
@@ -718,6 +719,7 @@ fn invalid_values_are_named_and_located() {
         "mps.corrected_strain_rate=true",
         "mps.wall_surface_no_slip=true",
         "mps.quadratic_strain_rate=true",
+        "mps.exact_projection=true",
     ] {
         let on = ok_with(MINIMAL, &["mps.pressure_scheme=incremental", on]);
         assert_ne!(plain.hash_hex, on.hash_hex);
@@ -733,6 +735,15 @@ fn invalid_values_are_named_and_located() {
         ],
     );
     assert_invalid(&e, "mps.quadratic_strain_rate", None, &["set one of them"]);
+    let e = err_with(
+        MINIMAL,
+        &[
+            "mps.pressure_scheme=incremental",
+            "mps.exact_projection=true",
+            "mps.wall_support=0.95",
+        ],
+    );
+    assert_invalid(&e, "mps.exact_projection", None, &["mps.wall_support"]);
 
     // from an override: no line, says so
     let e = err_with(MINIMAL, &["time.courant=1.5"]);

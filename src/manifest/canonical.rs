@@ -78,6 +78,11 @@ pub fn canonical_text<S: SceneSection>(manifest: &Manifest<S>) -> String {
         if !manifest.mps.quadratic_strain_rate {
             mps.remove("quadratic_strain_rate");
         }
+        if !manifest.mps.exact_projection
+            || manifest.mps.pressure_scheme == PressureSchemeName::Standard
+        {
+            mps.remove("exact_projection");
+        }
     }
     for (section, key) in [
         ("mps", "wall_collision_distance"),

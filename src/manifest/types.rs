@@ -259,6 +259,12 @@ pub struct Mps {
     /// `corrected_strain_rate`.
     #[serde(default)]
     pub quadratic_strain_rate: bool,
+    /// Incremental scheme: the increment's equation built from the very divergence and
+    /// gradient that measure and correct the velocity (-D G, an exact projection: the
+    /// corrected velocity has the divergence asked for), instead of the MPS Laplacian model.
+    /// Not with `wall_support`. Unused by `standard`.
+    #[serde(default)]
+    pub exact_projection: bool,
     /// Artificial compressibility on the PPE diagonal, in 1/Pa.
     #[serde(default = "default_compressibility_1_pa")]
     pub compressibility_1_pa: f64,
@@ -322,6 +328,7 @@ impl Default for Mps {
             corrected_strain_rate: false,
             wall_surface_no_slip: false,
             quadratic_strain_rate: false,
+            exact_projection: false,
             ppe_preconditioner: PpePreconditioner::default(),
             compressibility_1_pa: default_compressibility_1_pa(),
             collision_distance: default_collision_distance(),

@@ -338,3 +338,99 @@ fn in_order<const M: usize>(partials: &[[f64; M]]) -> [f64; M] {
     }
     total
 }
+
+/// Solves A x = b for a general (non-symmetric) A by Jacobi-preconditioned BiCGStab (van der
+/// Vorst 1992), from the guess in `x`. Stops when ||r|| <= tolerance ||b||. Reductions are
+/// order-fixed as in [`solve_pcg`] (DESIGN.md 6).
+pub fn solve_bicgstab(
+    a: &CsrMatrix,
+    b: &[f64],
+    x: &mut [f64],
+    tolerance: f64,
+    max_iterations: u32,
+) -> SolveReport {
+    use super::reduce::dot;
+    let n = a.rows();
+    let product = |v: &[f64], out: &mut Vec<f64>| {
+        *out = (0..n)
+            .into_par_iter()
+            .with_min_len(MIN_PARALLEL_LEN)
+            .map(|i| a.row_value(i, v))
+            .collect();
+    };
+    let jacobi = |v: &[f64]| -> Vec<f64> {
+        v.par_iter()
+            .with_min_len(MIN_PARALLEL_LEN)
+            .zip(&a.diagonal)
+            .map(|(v, d)| if *d != 0.0 { v / d } else { *v })
+            .collect()
+    };
+    let b_norm = dot(b, b).sqrt();
+    let mut ax = Vec::new();
+    product(x, &mut ax);
+    let mut r: Vec<f64> = b.iter().zip(&ax).map(|(b, ax)| b - ax).collect();
+    let report = |iterations: u32, r: &[f64]| {
+        let norm = dot(r, r).sqrt();
+        let relative = if b_norm > 0.0 { norm / b_norm } else { norm };
+        SolveReport {
+            iterations,
+            relative_residual: relative,
+            converged: relative <= tolerance || norm == 0.0,
+        }
+    };
+    let first = report(0, &r);
+    if first.converged || first.relative_residual.is_nan() {
+        return first;
+    }
+    let shadow = r.clone();
+    let (mut rho, mut alpha, mut omega) = (1.0f64, 1.0f64, 1.0f64);
+    let mut v = vec![0.0; n];
+    let mut p = vec![0.0; n];
+    let mut t = Vec::new();
+    for iteration in 1..=max_iterations {
+        let rho_next = dot(&shadow, &r);
+        if rho_next == 0.0 || omega == 0.0 {
+            return report(iteration, &r);
+        }
+        let beta = (rho_next / rho) * (alpha / omega);
+        rho = rho_next;
+        p = (0..n)
+            .into_par_iter()
+            .with_min_len(MIN_PARALLEL_LEN)
+            .map(|i| r[i] + beta * (p[i] - omega * v[i]))
+            .collect();
+        let y = jacobi(&p);
+        product(&y, &mut v);
+        alpha = rho / dot(&shadow, &v);
+        let s: Vec<f64> = (0..n)
+            .into_par_iter()
+            .with_min_len(MIN_PARALLEL_LEN)
+            .map(|i| r[i] - alpha * v[i])
+            .collect();
+        x.par_iter_mut()
+            .with_min_len(MIN_PARALLEL_LEN)
+            .zip(&y)
+            .for_each(|(x, y)| *x += alpha * y);
+        let half = report(iteration, &s);
+        if half.converged || half.relative_residual.is_nan() {
+            return half;
+        }
+        let z = jacobi(&s);
+        product(&z, &mut t);
+        omega = dot(&t, &s) / dot(&t, &t);
+        x.par_iter_mut()
+            .with_min_len(MIN_PARALLEL_LEN)
+            .zip(&z)
+            .for_each(|(x, z)| *x += omega * z);
+        r = (0..n)
+            .into_par_iter()
+            .with_min_len(MIN_PARALLEL_LEN)
+            .map(|i| s[i] - omega * t[i])
+            .collect();
+        let full = report(iteration, &r);
+        if full.converged || full.relative_residual.is_nan() {
+            return full;
+        }
+    }
+    report(max_iterations, &r)
+}

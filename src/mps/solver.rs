@@ -14,6 +14,7 @@ use super::viscosity::{StrainRateGradient, ViscousSettings, predict_velocity};
 use rayon::prelude::*;
 use std::time::Instant;
 
+mod exact;
 mod incremental;
 
 /// Physical and numerical parameters of the solver, all in SI units.
@@ -66,6 +67,10 @@ pub struct SolverConfig<const D: usize> {
     /// No-slip at the walls' surface, not at the wall particles (see
     /// [`crate::mps::viscosity::ViscousSettings::wall_surface_m`]).
     pub wall_surface_no_slip: bool,
+    /// Incremental scheme: the increment's equation is -D G with the correction's own
+    /// divergence and gradient (exact projection, `solver/exact.rs`) instead of the MPS
+    /// Laplacian model.
+    pub exact_projection: bool,
     /// Strain rate from the quadratic least-squares fit (over `corrected_strain_rate`).
     pub quadratic_strain_rate: bool,
     /// Aggregation multigrid instead of Jacobi as the PPE preconditioner.

@@ -212,6 +212,7 @@ pub fn run_info(path: &Path, size_bytes: u64, run: &RunFile) -> RunInfo {
                 "corrected_strain_rate",
                 "wall_surface_no_slip",
                 "quadratic_strain_rate",
+                "exact_projection",
             ] {
                 if let Some(v) = mps.and_then(|mps| mps.get(key)) {
                     text.push_str(&format!(", mps.{key} {v}"));

@@ -73,6 +73,7 @@ pub fn solver_config<const D: usize>(m: &Manifest, scene: &Scene<D>) -> SolverCo
         surface_depth_m: m.mps.surface_depth * l0,
         corrected_strain_rate: m.mps.corrected_strain_rate,
         wall_surface_no_slip: m.mps.wall_surface_no_slip,
+        exact_projection: m.mps.exact_projection,
         quadratic_strain_rate: m.mps.quadratic_strain_rate,
         compressibility_1_pa: m.mps.compressibility_1_pa,
         collision_distance_m: m.mps.collision_distance * l0,

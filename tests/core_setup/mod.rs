@@ -63,6 +63,7 @@ pub fn config<const D: usize>(
         surface_depth_m: 0.0,
         corrected_strain_rate: false,
         wall_surface_no_slip: false,
+        exact_projection: false,
         quadratic_strain_rate: false,
         compressibility_1_pa: 0.45e-9,
         collision_distance_m: 0.5 * l0,

@@ -35,6 +35,7 @@ use crate::mps::operators::{
     moment_matrix,
 };
 use crate::mps::particles::Vector;
+use crate::mps::pressure::solve_bicgstab;
 use nalgebra::SMatrix;
 use rayon::prelude::*;
 use std::cell::OnceCell;
@@ -176,27 +177,52 @@ impl<const D: usize> Solver<D> {
                 -rho / dt_s * div + compression_scale * compression
             })
             .collect();
+        // Exact projection: -D G with the correction's own gradient (`exact.rs`).
+        let gradient = c.exact_projection.then(|| self.gradient_rows(&corrections));
         // -lap(dp) over fluid neighbours and supporting walls: any other wall's increment
         // mirrors the particle's, so its term vanishes.
-        let (matrix, known) = self.assemble_ppe(
-            dt_s,
-            &rows,
-            &unknown_of,
-            |j| is_fluid(j) || support[j],
-            // (-p^n as it stands when the surface holds 0: the same bits as before the option.)
-            |j| {
-                if surface_on {
-                    surface_value[j] - p.pressure_pa[j]
-                } else {
-                    -p.pressure_pa[j]
-                }
-            },
-        );
+        let (matrix, known) = if let Some(gradient) = &gradient {
+            let known: Vec<f64> = (0..p.len())
+                .map(|j| {
+                    if surface_on {
+                        surface_value[j] - p.pressure_pa[j]
+                    } else {
+                        -p.pressure_pa[j]
+                    }
+                })
+                .collect();
+            self.exact_ppe(dt_s, &rows, &unknown_of, gradient, &known)
+        } else {
+            self.assemble_ppe(
+                dt_s,
+                &rows,
+                &unknown_of,
+                |j| is_fluid(j) || support[j],
+                // (-p^n as it stands when the surface holds 0: the same bits as before the option.)
+                |j| {
+                    if surface_on {
+                        surface_value[j] - p.pressure_pa[j]
+                    } else {
+                        -p.pressure_pa[j]
+                    }
+                },
+            )
+        };
         let rhs: Vec<f64> = source.iter().zip(&known).map(|(s, k)| s + k).collect();
         // The increment is small once the carried pressure has settled: start from zero.
         let mut solution = vec![0.0; rows.len()];
         let solve_started = Instant::now();
-        let ppe = self.solve_ppe_system(&matrix, &rhs, &mut solution, &rows);
+        let ppe = if gradient.is_some() {
+            solve_bicgstab(
+                &matrix,
+                &rhs,
+                &mut solution,
+                c.ppe_tolerance,
+                c.ppe_max_iterations,
+            )
+        } else {
+            self.solve_ppe_system(&matrix, &rhs, &mut solution, &rows)
+        };
         let solve_s = solve_started.elapsed().as_secs_f64();
         self.timing.pressure_solve_s += solve_s;
         self.timing.ppe_iterations += u64::from(ppe.iterations);
@@ -232,6 +258,14 @@ impl<const D: usize> Solver<D> {
             .map(|i| {
                 if !is_fluid(i) {
                     return Vector::<D>::zeros();
+                }
+                if let Some(gradient) = &gradient {
+                    return gradient[i]
+                        .iter()
+                        .fold(Vector::<D>::zeros(), |g, &(k, coef)| {
+                            g + coef * increment[k as usize]
+                        })
+                        * scale;
                 }
                 let di = increment[i];
                 let wall_base = OnceCell::new();

@@ -1,0 +1,146 @@
+//! The exact projection of the incremental scheme (`exact_projection`): the increment's
+//! equation is built from the very divergence and gradient that measure and correct the
+//! velocity, A = -D G, instead of the MPS Laplacian model. The corrected velocity then has
+//! the divergence the equation asked for, to the solver's tolerance; on frozen positions the
+//! projection I - G (D G)^-1 D is idempotent, so no disturbance can grow through it, whatever
+//! the walls' treatment (Cummins & Rudman 1999 discuss exact against approximate projection
+//! in SPH). The price: A spans two rings of neighbours and is not symmetric (BiCGStab).
+use super::{PARTICLES_PER_TASK, Solver};
+use crate::mps::kernel::weight;
+use crate::mps::particles::{ParticleKind, Vector};
+use crate::mps::pressure::CsrMatrix;
+use nalgebra::SMatrix;
+use rayon::prelude::*;
+
+/// One fluid particle's gradient as a linear map of the increment: (particle, coefficient)
+/// pairs, sorted by particle.
+pub(super) type GradientRow<const D: usize> = Vec<(u32, Vector<D>)>;
+
+/// Adds `value` at `column` to a row kept as (column, value) pairs, merged after sorting.
+fn merged<T: Copy + std::ops::AddAssign>(mut entries: Vec<(u32, T)>) -> Vec<(u32, T)> {
+    // A stable sort keeps each column's contributions in their order of arrival: the sums
+    // below are the same on any thread count.
+    entries.sort_by_key(|e| e.0);
+    let mut out: Vec<(u32, T)> = Vec::with_capacity(entries.len());
+    for (c, v) in entries {
+        match out.last_mut() {
+            Some(last) if last.0 == c => last.1 += v,
+            _ => out.push((c, v)),
+        }
+    }
+    out
+}
+
+impl<const D: usize> Solver<D> {
+    /// The corrected increment gradient of every fluid particle as sparse rows (empty for
+    /// other particles): C_i sum_j (dp_j - dp_i) e_ij over fluid neighbours, with
+    /// e_ij = r_ij w_ij / r_ij^2, and walls and dummies carrying the weighted mean of i's
+    /// fluid neighbours' increments (as the increment's correction does).
+    pub(super) fn gradient_rows(&self, corrections: &[SMatrix<f64, D, D>]) -> Vec<GradientRow<D>> {
+        let p = &self.particles;
+        let nb = &self.pairs.near;
+        let radius = self.refs.radius_n_m;
+        (0..p.len())
+            .into_par_iter()
+            .with_min_len(PARTICLES_PER_TASK)
+            .with_max_len(PARTICLES_PER_TASK)
+            .map(|i| {
+                if p.kind[i] != ParticleKind::Fluid {
+                    return Vec::new();
+                }
+                let c = &corrections[i];
+                let mut entries: Vec<(u32, Vector<D>)> = Vec::new();
+                let mut own = Vector::<D>::zeros();
+                let mut walls = Vector::<D>::zeros();
+                let mut fluid_weights: Vec<(u32, f64)> = Vec::new();
+                let mut weight_sum = 0.0;
+                for &j in nb.of(i) {
+                    let r = nb.displacement(&p.position_m, i, j as usize);
+                    let r2 = r.norm_squared();
+                    let w = weight(r2.sqrt(), radius);
+                    if w == 0.0 {
+                        continue;
+                    }
+                    let e = r * (w / r2);
+                    if p.kind[j as usize] == ParticleKind::Fluid {
+                        let ce = c * e;
+                        entries.push((j, ce));
+                        own -= ce;
+                        fluid_weights.push((j, w));
+                        weight_sum += w;
+                    } else {
+                        walls += e;
+                    }
+                }
+                if weight_sum > 0.0 && walls != Vector::<D>::zeros() {
+                    let ce = c * walls;
+                    for &(j, w) in &fluid_weights {
+                        entries.push((j, ce * (w / weight_sum)));
+                    }
+                    own -= ce;
+                }
+                entries.push((i as u32, own));
+                merged(entries)
+            })
+            .collect()
+    }
+
+    /// -D G over the unknowns `rows` (fluid particles; `unknown_of` their row), D the MPS
+    /// divergence (walls keep their velocity, so only i's own correction counts for them),
+    /// plus the artificial compressibility on the diagonal. Known columns (surface particles)
+    /// are summed against `known` into the second value of each row.
+    pub(super) fn exact_ppe(
+        &self,
+        dt_s: f64,
+        rows: &[usize],
+        unknown_of: &[u32],
+        gradient: &[GradientRow<D>],
+        known: &[f64],
+    ) -> (CsrMatrix, Vec<f64>) {
+        let p = &self.particles;
+        let nb = &self.pairs.near;
+        let refs = self.refs;
+        let scale = D as f64 / refs.n0;
+        let diag_extra =
+            self.config.density_kg_m3 * self.config.compressibility_1_pa / (dt_s * dt_s);
+        CsrMatrix::assemble(rows.len(), |k, columns, values| {
+            let i = rows[k];
+            let mut entries: Vec<(u32, f64)> = Vec::new();
+            let mut all = Vector::<D>::zeros();
+            for &j in nb.of(i) {
+                let r = nb.displacement(&p.position_m, i, j as usize);
+                let r2 = r.norm_squared();
+                let w = weight(r2.sqrt(), refs.radius_n_m);
+                if w == 0.0 {
+                    continue;
+                }
+                let e = r * (w / r2);
+                all += e;
+                if p.kind[j as usize] == ParticleKind::Fluid {
+                    // -(d/n0) e_ij . G_j
+                    for &(col, g) in &gradient[j as usize] {
+                        entries.push((col, -scale * e.dot(&g)));
+                    }
+                }
+            }
+            // +(d/n0) (sum_j e_ij) . G_i
+            for &(col, g) in &gradient[i] {
+                entries.push((col, scale * all.dot(&g)));
+            }
+            let mut diag = diag_extra;
+            let mut known_sum = 0.0;
+            for (col, v) in merged(entries) {
+                let col = col as usize;
+                if col == i {
+                    diag += v;
+                } else if unknown_of[col] != u32::MAX {
+                    columns.push(unknown_of[col]);
+                    values.push(v);
+                } else {
+                    known_sum -= v * known[col];
+                }
+            }
+            (diag, known_sum)
+        })
+    }
+}
