@@ -735,15 +735,6 @@ fn invalid_values_are_named_and_located() {
         ],
     );
     assert_invalid(&e, "mps.quadratic_strain_rate", None, &["set one of them"]);
-    let e = err_with(
-        MINIMAL,
-        &[
-            "mps.pressure_scheme=incremental",
-            "mps.exact_projection=true",
-            "mps.wall_support=0.95",
-        ],
-    );
-    assert_invalid(&e, "mps.exact_projection", None, &["mps.wall_support"]);
 
     // from an override: no line, says so
     let e = err_with(MINIMAL, &["time.courant=1.5"]);

@@ -262,7 +262,7 @@ pub struct Mps {
     /// Incremental scheme: the increment's equation built from the very divergence and
     /// gradient that measure and correct the velocity (-D G, an exact projection: the
     /// corrected velocity has the divergence asked for), instead of the MPS Laplacian model.
-    /// Not with `wall_support`. Unused by `standard`.
+    /// Supporting walls (`wall_support`) are unknowns of it too. Unused by `standard`.
     #[serde(default)]
     pub exact_projection: bool,
     /// Artificial compressibility on the PPE diagonal, in 1/Pa.

@@ -211,13 +211,6 @@ pub fn check<S: SceneSection>(m: &Manifest<S>) -> Vec<Issue> {
             ),
         );
     }
-    if p.exact_projection && p.wall_support > 0.0 {
-        c.fail(
-            "mps.exact_projection",
-            "is not used with mps.wall_support (the projection needs no wall unknowns): set mps.wall_support to 0"
-                .to_string(),
-        );
-    }
     if p.quadratic_strain_rate && p.corrected_strain_rate {
         c.fail(
             "mps.quadratic_strain_rate",

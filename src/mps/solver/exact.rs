@@ -35,8 +35,13 @@ impl<const D: usize> Solver<D> {
     /// The corrected increment gradient of every fluid particle as sparse rows (empty for
     /// other particles): C_i sum_j (dp_j - dp_i) e_ij over fluid neighbours, with
     /// e_ij = r_ij w_ij / r_ij^2, and walls and dummies carrying the weighted mean of i's
-    /// fluid neighbours' increments (as the increment's correction does).
-    pub(super) fn gradient_rows(&self, corrections: &[SMatrix<f64, D, D>]) -> Vec<GradientRow<D>> {
+    /// fluid neighbours' increments (as the increment's correction does); supporting walls
+    /// (`support`) are unknowns and carry their own.
+    pub(super) fn gradient_rows(
+        &self,
+        corrections: &[SMatrix<f64, D, D>],
+        support: &[bool],
+    ) -> Vec<GradientRow<D>> {
         let p = &self.particles;
         let nb = &self.pairs.near;
         let radius = self.refs.radius_n_m;
@@ -62,12 +67,14 @@ impl<const D: usize> Solver<D> {
                         continue;
                     }
                     let e = r * (w / r2);
-                    if p.kind[j as usize] == ParticleKind::Fluid {
+                    if p.kind[j as usize] == ParticleKind::Fluid || support[j as usize] {
                         let ce = c * e;
                         entries.push((j, ce));
                         own -= ce;
-                        fluid_weights.push((j, w));
-                        weight_sum += w;
+                        if p.kind[j as usize] == ParticleKind::Fluid {
+                            fluid_weights.push((j, w));
+                            weight_sum += w;
+                        }
                     } else {
                         walls += e;
                     }
@@ -85,8 +92,9 @@ impl<const D: usize> Solver<D> {
             .collect()
     }
 
-    /// -D G over the unknowns `rows` (fluid particles; `unknown_of` their row), D the MPS
-    /// divergence (walls keep their velocity, so only i's own correction counts for them),
+    /// -D G over the unknowns `rows` (fluid particles and supporting walls; `unknown_of` their
+    /// row), D the MPS divergence (walls keep their velocity: a wall neighbour adds nothing but
+    /// its weight to i's own term, and a wall row has no own term),
     /// plus the artificial compressibility on the diagonal. Known columns (surface particles)
     /// are summed against `known` into the second value of each row.
     pub(super) fn exact_ppe(
@@ -123,7 +131,7 @@ impl<const D: usize> Solver<D> {
                     }
                 }
             }
-            // +(d/n0) (sum_j e_ij) . G_i
+            // +(d/n0) (sum_j e_ij) . G_i (empty for a wall)
             for &(col, g) in &gradient[i] {
                 entries.push((col, scale * all.dot(&g)));
             }

@@ -178,7 +178,9 @@ impl<const D: usize> Solver<D> {
             })
             .collect();
         // Exact projection: -D G with the correction's own gradient (`exact.rs`).
-        let gradient = c.exact_projection.then(|| self.gradient_rows(&corrections));
+        let gradient = c
+            .exact_projection
+            .then(|| self.gradient_rows(&corrections, &support));
         // -lap(dp) over fluid neighbours and supporting walls: any other wall's increment
         // mirrors the particle's, so its term vanishes.
         let (matrix, known) = if let Some(gradient) = &gradient {
