@@ -15,6 +15,16 @@ fn driving_pa_m() -> f64 {
     2300.0 * 9.81 * (5.0f64).to_radians().sin()
 }
 
+/// The plug speed of every diagnostics row of the run at `path` from `from_s` on.
+fn plug_speeds_after(path: &std::path::Path, from_s: f64) -> Vec<f64> {
+    let run = mps_runner::record::read_run(path).unwrap();
+    run.diagnostics
+        .iter()
+        .filter(|d| d.time_s >= from_s)
+        .map(|d| d.metrics["plug_speed_m_s"])
+        .collect()
+}
+
 fn run(sets: &[&str], threads: usize) -> (mps_runner::run::RunResult, tempfile::TempDir) {
     let mut all = vec![
         "spacing_m=0.01",
@@ -44,13 +54,7 @@ fn a_layer_twice_the_critical_depth_slides_on_a_sheared_zone_at_the_closed_form_
     // few per cent (55-60.5 mm/s over 1-6 s; mean 57.2): its mean over [1.5, 3] s is compared.
     let sheared = h - h_c + 0.5 * l0;
     let expected = driving_pa_m() * sheared * sheared / (2.0 * 50.0);
-    let run = mps_runner::record::read_run(&result.path).unwrap();
-    let rows: Vec<f64> = run
-        .diagnostics
-        .iter()
-        .filter(|d| d.time_s >= 1.5)
-        .map(|d| d.metrics["plug_speed_m_s"])
-        .collect();
+    let rows = plug_speeds_after(&result.path, 1.5);
     assert!(rows.len() >= 100, "{} rows after 1.5 s", rows.len());
     let mean = rows.iter().sum::<f64>() / rows.len() as f64;
     assert!(
@@ -98,13 +102,7 @@ fn a_layer_below_the_critical_depth_stays_rigid_and_replays_bit_for_bit() {
 #[test]
 fn with_no_slip_at_the_wall_surface_the_plug_moves_at_the_nominal_closed_form_speed() {
     let (result, _dir) = run(&["mps.wall_surface_no_slip=true"], 2);
-    let run = mps_runner::record::read_run(&result.path).unwrap();
-    let rows: Vec<f64> = run
-        .diagnostics
-        .iter()
-        .filter(|d| d.time_s >= 1.5)
-        .map(|d| d.metrics["plug_speed_m_s"])
-        .collect();
+    let rows = plug_speeds_after(&result.path, 1.5);
     let mean = rows.iter().sum::<f64>() / rows.len() as f64;
     let closed = result.summary.metrics["closed_form_plug_speed_m_s"];
     assert!(
@@ -149,13 +147,7 @@ fn no_slip_at_the_wall_surface_gives_the_half_poiseuille_speed_of_the_nominal_de
         let resolved = mps_runner::experiment::load(&path, &sets).expect("manifest");
         let out = tempfile::tempdir().unwrap();
         let result = common::run_completed(&resolved, out.path(), 2);
-        let run = mps_runner::record::read_run(&result.path).unwrap();
-        let rows: Vec<f64> = run
-            .diagnostics
-            .iter()
-            .filter(|d| d.time_s >= 1.0)
-            .map(|d| d.metrics["plug_speed_m_s"])
-            .collect();
+        let rows = plug_speeds_after(&result.path, 1.0);
         assert!(rows.len() >= 40, "{} rows after 1 s", rows.len());
         // The closed form of a Newtonian layer (h_c = 0) is the nominal half-Poiseuille speed.
         let closed = result.summary.metrics["closed_form_plug_speed_m_s"];

@@ -382,23 +382,11 @@ fn surface_depth_puts_the_zero_of_pressure_at_the_fill_height() {
     assert!(error_at_centres < -0.04, "{error_at_centres:.4}");
 }
 
-/// No slip at the walls' surface (`mps.wall_surface_no_slip`): for simple shear u = (a y, 0)
-/// with y from the floor's surface (half a spacing above the wall row) and the walls at rest,
-/// the velocity extrapolated through the surface makes the strain rate's gradient exact at
-/// every row next to the floor, plain or corrected. With the walls' own velocity (zero, at
-/// their centres) the bottom row's shear is short.
-#[test]
-fn wall_surface_no_slip_makes_the_shear_exact_next_to_the_floor() {
-    use mps_runner::mps::Particles;
-    use mps_runner::mps::kernel::RefValues;
-    use mps_runner::mps::viscosity::{StrainRateGradient, velocity_gradient};
-    let l0 = 0.01;
-    let refs = RefValues::on_lattice::<2>(l0, 2.1 * l0, 3.1 * l0);
-    let shear = 2.0;
-    let columns = 14;
-    let mut p = Particles::<2>::default();
-    // Fluid rows at (k + 1/2) l0 above the surface y = 0; wall row and two dummy rows below.
-    for row in -3i32..6 {
+/// Fluid rows 0..rows above a floor whose surface is y = 0 (particles at (k + 1/2) l0), a
+/// wall row and two dummy rows below it, `columns` wide, all at rest.
+fn floor_lattice(l0: f64, columns: usize, rows: i32) -> mps_runner::mps::Particles<2> {
+    let mut p = mps_runner::mps::Particles::<2>::default();
+    for row in -3i32..rows {
         for column in 0..columns {
             let x = Vector::<2>::new(column as f64 * l0, (f64::from(row) + 0.5) * l0);
             let kind = match row {
@@ -409,6 +397,23 @@ fn wall_surface_no_slip_makes_the_shear_exact_next_to_the_floor() {
             p.push(x, kind);
         }
     }
+    p
+}
+
+/// No slip at the walls' surface (`mps.wall_surface_no_slip`): for simple shear u = (a y, 0)
+/// with y from the floor's surface (half a spacing above the wall row) and the walls at rest,
+/// the velocity extrapolated through the surface makes the strain rate's gradient exact at
+/// every row next to the floor, plain or corrected. With the walls' own velocity (zero, at
+/// their centres) the bottom row's shear is short.
+#[test]
+fn wall_surface_no_slip_makes_the_shear_exact_next_to_the_floor() {
+    use mps_runner::mps::kernel::RefValues;
+    use mps_runner::mps::viscosity::{StrainRateGradient, velocity_gradient};
+    let l0 = 0.01;
+    let refs = RefValues::on_lattice::<2>(l0, 2.1 * l0, 3.1 * l0);
+    let shear = 2.0;
+    let columns = 14;
+    let mut p = floor_lattice(l0, columns, 6);
     for i in 0..p.len() {
         if p.kind[i] == ParticleKind::Fluid {
             p.velocity_m_s[i] = Vector::<2>::new(shear * p.position_m[i][1], 0.0);
@@ -460,7 +465,6 @@ fn wall_surface_no_slip_makes_the_shear_exact_next_to_the_floor() {
 /// model, exact for linear fields only, is off at the floor and at the surface.
 #[test]
 fn quadratic_strain_rate_is_exact_for_a_parabolic_profile_from_floor_to_surface() {
-    use mps_runner::mps::Particles;
     use mps_runner::mps::kernel::RefValues;
     use mps_runner::mps::viscosity::{StrainRateGradient, velocity_gradient};
     let l0 = 0.01;
@@ -471,18 +475,7 @@ fn quadratic_strain_rate_is_exact_for_a_parabolic_profile_from_floor_to_surface(
     let a = 3.0;
     let profile = |y: f64| a * y - a * y * y / (2.0 * depth);
     let slope = |y: f64| a - a * y / depth;
-    let mut p = Particles::<2>::default();
-    for row in -3i32..rows {
-        for column in 0..columns {
-            let x = Vector::<2>::new(column as f64 * l0, (f64::from(row) + 0.5) * l0);
-            let kind = match row {
-                -1 => ParticleKind::Wall,
-                r if r < -1 => ParticleKind::Dummy,
-                _ => ParticleKind::Fluid,
-            };
-            p.push(x, kind);
-        }
-    }
+    let mut p = floor_lattice(l0, columns, rows);
     for i in 0..p.len() {
         if p.kind[i] == ParticleKind::Fluid {
             p.velocity_m_s[i] = Vector::<2>::new(profile(p.position_m[i][1]), 0.0);

@@ -19,6 +19,18 @@ pub const MIN_PARALLEL_LEN: usize = 4096;
 /// most of it.
 pub const PARTICLES_PER_TASK: usize = 256;
 
+/// f(i) for every particle index in 0..n, in tasks of [`PARTICLES_PER_TASK`] particles,
+/// collected in index order (each value computed by one task alone: the same bits on any
+/// thread count).
+pub fn map_particles<T: Send>(n: usize, f: impl Fn(usize) -> T + Sync + Send) -> Vec<T> {
+    (0..n)
+        .into_par_iter()
+        .with_min_len(PARTICLES_PER_TASK)
+        .with_max_len(PARTICLES_PER_TASK)
+        .map(f)
+        .collect()
+}
+
 /// Sum of f(i) for i in 0..n, bitwise identical on any thread count.
 pub fn sum_by<F>(n: usize, f: F) -> f64
 where

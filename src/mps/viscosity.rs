@@ -248,7 +248,12 @@ fn quadratic_gradient<const D: usize>(
     let largest = (0..unknowns).fold(0.0f64, |m, k| m.max(normal[(k, k)]));
     let cholesky = normal.cholesky()?;
     let l = cholesky.l_dirty();
-    if (0..unknowns).any(|k| !(l[(k, k)] * l[(k, k)] > MIN_FIT_CONDITION * largest)) {
+    // (A NaN pivot compares as not greater: refused too.)
+    let weak = |k: usize| {
+        (l[(k, k)] * l[(k, k)]).partial_cmp(&(MIN_FIT_CONDITION * largest))
+            != Some(std::cmp::Ordering::Greater)
+    };
+    if (0..unknowns).any(weak) {
         return None;
     }
     let solution = cholesky.solve(&rhs);

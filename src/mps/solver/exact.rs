@@ -5,12 +5,12 @@
 //! projection I - G (D G)^-1 D is idempotent, so no disturbance can grow through it, whatever
 //! the walls' treatment (Cummins & Rudman 1999 discuss exact against approximate projection
 //! in SPH). The price: A spans two rings of neighbours and is not symmetric (BiCGStab).
-use super::{PARTICLES_PER_TASK, Solver};
+use super::Solver;
 use crate::mps::kernel::weight;
 use crate::mps::particles::{ParticleKind, Vector};
 use crate::mps::pressure::CsrMatrix;
+use crate::mps::reduce::map_particles;
 use nalgebra::SMatrix;
-use rayon::prelude::*;
 
 /// One fluid particle's gradient as a linear map of the increment: (particle, coefficient)
 /// pairs, sorted by particle.
@@ -45,51 +45,46 @@ impl<const D: usize> Solver<D> {
         let p = &self.particles;
         let nb = &self.pairs.near;
         let radius = self.refs.radius_n_m;
-        (0..p.len())
-            .into_par_iter()
-            .with_min_len(PARTICLES_PER_TASK)
-            .with_max_len(PARTICLES_PER_TASK)
-            .map(|i| {
-                if p.kind[i] != ParticleKind::Fluid {
-                    return Vec::new();
+        map_particles(p.len(), |i| {
+            if p.kind[i] != ParticleKind::Fluid {
+                return Vec::new();
+            }
+            let c = &corrections[i];
+            let mut entries: Vec<(u32, Vector<D>)> = Vec::new();
+            let mut own = Vector::<D>::zeros();
+            let mut walls = Vector::<D>::zeros();
+            let mut fluid_weights: Vec<(u32, f64)> = Vec::new();
+            let mut weight_sum = 0.0;
+            for &j in nb.of(i) {
+                let r = nb.displacement(&p.position_m, i, j as usize);
+                let r2 = r.norm_squared();
+                let w = weight(r2.sqrt(), radius);
+                if w == 0.0 {
+                    continue;
                 }
-                let c = &corrections[i];
-                let mut entries: Vec<(u32, Vector<D>)> = Vec::new();
-                let mut own = Vector::<D>::zeros();
-                let mut walls = Vector::<D>::zeros();
-                let mut fluid_weights: Vec<(u32, f64)> = Vec::new();
-                let mut weight_sum = 0.0;
-                for &j in nb.of(i) {
-                    let r = nb.displacement(&p.position_m, i, j as usize);
-                    let r2 = r.norm_squared();
-                    let w = weight(r2.sqrt(), radius);
-                    if w == 0.0 {
-                        continue;
-                    }
-                    let e = r * (w / r2);
-                    if p.kind[j as usize] == ParticleKind::Fluid || support[j as usize] {
-                        let ce = c * e;
-                        entries.push((j, ce));
-                        own -= ce;
-                        if p.kind[j as usize] == ParticleKind::Fluid {
-                            fluid_weights.push((j, w));
-                            weight_sum += w;
-                        }
-                    } else {
-                        walls += e;
-                    }
-                }
-                if weight_sum > 0.0 && walls != Vector::<D>::zeros() {
-                    let ce = c * walls;
-                    for &(j, w) in &fluid_weights {
-                        entries.push((j, ce * (w / weight_sum)));
-                    }
+                let e = r * (w / r2);
+                if p.kind[j as usize] == ParticleKind::Fluid || support[j as usize] {
+                    let ce = c * e;
+                    entries.push((j, ce));
                     own -= ce;
+                    if p.kind[j as usize] == ParticleKind::Fluid {
+                        fluid_weights.push((j, w));
+                        weight_sum += w;
+                    }
+                } else {
+                    walls += e;
                 }
-                entries.push((i as u32, own));
-                merged(entries)
-            })
-            .collect()
+            }
+            if weight_sum > 0.0 && walls != Vector::<D>::zeros() {
+                let ce = c * walls;
+                for &(j, w) in &fluid_weights {
+                    entries.push((j, ce * (w / weight_sum)));
+                }
+                own -= ce;
+            }
+            entries.push((i as u32, own));
+            merged(entries)
+        })
     }
 
     /// -D G over the unknowns `rows` (fluid particles and supporting walls; `unknown_of` their

@@ -36,6 +36,7 @@ use crate::mps::operators::{
 };
 use crate::mps::particles::Vector;
 use crate::mps::pressure::solve_bicgstab;
+use crate::mps::reduce::map_particles;
 use nalgebra::SMatrix;
 use rayon::prelude::*;
 use std::cell::OnceCell;
@@ -73,48 +74,42 @@ impl<const D: usize> Solver<D> {
         let nb = &self.pairs.near;
         let rho = self.config.density_kg_m3;
         let rho_g = self.gravity() * rho;
-        (0..p.len())
-            .into_par_iter()
-            .with_min_len(PARTICLES_PER_TASK)
-            .with_max_len(PARTICLES_PER_TASK)
-            .map(|i| {
-                if p.kind[i] != ParticleKind::Fluid {
-                    return Vector::<D>::zeros();
-                }
-                let pi = p.pressure_pa[i];
-                // Only particles with a wall or dummy neighbour need the reference.
-                let wall_base = OnceCell::new();
-                let wall_base = || {
-                    *wall_base.get_or_init(|| {
-                        let base =
-                            wall_reference(p, nb, self.refs.radius_n_m, i, &p.pressure_pa, rho_g)
-                                - pi;
-                        // Driven into a wall, i must not see it lower than itself: the mean of
-                        // its neighbours would pull a particle with a pressure peak into it.
-                        if self.pressed_against_wall(i) {
-                            base.max(0.0)
-                        } else {
-                            base
-                        }
-                    })
-                };
-                let g = corrected_gradient(
-                    &p.position_m,
-                    nb,
-                    i,
-                    self.refs.radius_n_m,
-                    &corrections[i],
-                    |j, r| {
-                        if p.kind[j] == ParticleKind::Fluid {
-                            p.pressure_pa[j] - pi
-                        } else {
-                            wall_base() + rho_g.dot(r)
-                        }
-                    },
-                );
-                (g + self.regularisation(i, pi)) * (-1.0 / rho)
-            })
-            .collect()
+        map_particles(p.len(), |i| {
+            if p.kind[i] != ParticleKind::Fluid {
+                return Vector::<D>::zeros();
+            }
+            let pi = p.pressure_pa[i];
+            // Only particles with a wall or dummy neighbour need the reference.
+            let wall_base = OnceCell::new();
+            let wall_base = || {
+                *wall_base.get_or_init(|| {
+                    let base =
+                        wall_reference(p, nb, self.refs.radius_n_m, i, &p.pressure_pa, rho_g) - pi;
+                    // Driven into a wall, i must not see it lower than itself: the mean of
+                    // its neighbours would pull a particle with a pressure peak into it.
+                    if self.pressed_against_wall(i) {
+                        base.max(0.0)
+                    } else {
+                        base
+                    }
+                })
+            };
+            let g = corrected_gradient(
+                &p.position_m,
+                nb,
+                i,
+                self.refs.radius_n_m,
+                &corrections[i],
+                |j, r| {
+                    if p.kind[j] == ParticleKind::Fluid {
+                        p.pressure_pa[j] - pi
+                    } else {
+                        wall_base() + rho_g.dot(r)
+                    }
+                },
+            );
+            (g + self.regularisation(i, pi)) * (-1.0 / rho)
+        })
     }
 
     /// Steps (3) and (4) of the incremental scheme at the predicted positions: n*, free
