@@ -8,8 +8,9 @@
 //! (`mps.ppe_preconditioner: jacobi`, `mps.pressure_scheme: standard` with
 //! `mps.compression_relaxation`, `mps.pair_stabilisation`, `mps.wall_support` and
 //! `mps.pressure_regularisation` (with `mps.regularisation_radius`) and `mps.surface_depth`
-//! at 0 (and under the standard scheme), `mps.corrected_strain_rate`, `mps.wall_surface_no_slip` and
-//! `mps.quadratic_strain_rate` false, `stop.rest_*` without `stop.rest_metric`, null
+//! at 0 (and under the standard scheme), `mps.corrected_strain_rate`,
+//! `mps.wall_surface_no_slip`, `mps.quadratic_strain_rate` and `mps.exact_projection` (also
+//! under the standard scheme) false, `stop.rest_*` without `stop.rest_metric`, null
 //! `mps.wall_collision_*`, `time.dt_min_s` and `stop.max_ghost_particles`, an empty
 //! `boundaries` section), so every experiment keeps the hash it had before they existed and
 //! files written then still verify. JSON is YAML, so the canonical text loads back through
@@ -69,19 +70,21 @@ pub fn canonical_text<S: SceneSection>(manifest: &Manifest<S>) -> String {
         if !mps.contains_key("pressure_regularisation") {
             mps.remove("regularisation_radius");
         }
-        if !manifest.mps.corrected_strain_rate {
-            mps.remove("corrected_strain_rate");
-        }
-        if !manifest.mps.wall_surface_no_slip {
-            mps.remove("wall_surface_no_slip");
-        }
-        if !manifest.mps.quadratic_strain_rate {
-            mps.remove("quadratic_strain_rate");
-        }
-        if !manifest.mps.exact_projection
-            || manifest.mps.pressure_scheme == PressureSchemeName::Standard
-        {
-            mps.remove("exact_projection");
+        // The switches: off (false) is the behaviour before they existed; the exact projection
+        // is read by the incremental scheme only.
+        let incremental = manifest.mps.pressure_scheme != PressureSchemeName::Standard;
+        for (key, on) in [
+            ("corrected_strain_rate", manifest.mps.corrected_strain_rate),
+            ("wall_surface_no_slip", manifest.mps.wall_surface_no_slip),
+            ("quadratic_strain_rate", manifest.mps.quadratic_strain_rate),
+            (
+                "exact_projection",
+                manifest.mps.exact_projection && incremental,
+            ),
+        ] {
+            if !on {
+                mps.remove(key);
+            }
         }
     }
     for (section, key) in [

@@ -62,8 +62,8 @@ pub struct SolverConfig<const D: usize> {
     /// Incremental scheme: a free-surface particle holds rho |g| surface_depth_m
     /// max(-n . g/|g|, 0) (0 = p = 0 at surface particles).
     pub surface_depth_m: f64,
-    /// Strain rate from the corrected velocity gradient (corrective matrix).
-    pub corrected_strain_rate: bool,
+    /// How the strain rate's velocity gradient is estimated.
+    pub strain_rate_gradient: StrainRateGradient,
     /// No-slip at the walls' surface, not at the wall particles (see
     /// [`crate::mps::viscosity::ViscousSettings::wall_surface_m`]).
     pub wall_surface_no_slip: bool,
@@ -71,8 +71,6 @@ pub struct SolverConfig<const D: usize> {
     /// divergence and gradient (exact projection, `solver/exact.rs`) instead of the MPS
     /// Laplacian model.
     pub exact_projection: bool,
-    /// Strain rate from the quadratic least-squares fit (over `corrected_strain_rate`).
-    pub quadratic_strain_rate: bool,
     /// Aggregation multigrid instead of Jacobi as the PPE preconditioner.
     pub multigrid_ppe: bool,
     pub compressibility_1_pa: f64,
@@ -366,13 +364,7 @@ impl<const D: usize> Solver<D> {
             stress_gradient_term: c.stress_gradient_term,
             tolerance: c.viscosity_tolerance,
             max_iterations: c.viscosity_max_iterations,
-            gradient: if c.quadratic_strain_rate {
-                StrainRateGradient::Quadratic
-            } else if c.corrected_strain_rate {
-                StrainRateGradient::Corrected
-            } else {
-                StrainRateGradient::Plain
-            },
+            gradient: c.strain_rate_gradient,
             wall_surface_m: c.wall_surface_no_slip.then_some(0.5 * c.spacing_m),
         }
     }

@@ -222,12 +222,12 @@ fn quadratic_gradient<const D: usize>(
     for &j in nb.of(i) {
         let j = j as usize;
         let r = nb.displacement(&p.position_m, i, j);
-        let w = weight(r.norm(), refs.radius_n_m);
+        let d = r.norm();
+        let w = weight(d, refs.radius_n_m);
         if w == 0.0 {
             continue;
         }
         if frame.is_some() && p.kind[j] != ParticleKind::Fluid {
-            let d = r.norm();
             if d < nearest_wall {
                 nearest_wall = d;
                 wall_velocity = Some(p.velocity_m_s[j]);
@@ -266,7 +266,8 @@ fn quadratic_gradient<const D: usize>(
     Some(g)
 }
 
-/// Smallest squared pivot of the quadratic fit, relative to its largest diagonal entry, accepted (see [`quadratic_gradient`]).
+/// Smallest squared pivot of the quadratic fit, relative to its largest diagonal entry,
+/// accepted (see [`quadratic_gradient`]).
 const MIN_FIT_CONDITION: f64 = 1e-6;
 
 /// Pi = 2 e_ij e_ij with e = (G + G^T)/2 (seed 000 eqs. 9-11, full tensor contraction).

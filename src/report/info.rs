@@ -36,10 +36,10 @@ pub struct RunInfo {
     /// without a `/summary` message.
     pub stop_rule: Option<String>,
     /// `mps.pressure_scheme` of the stored manifest (`standard` when the canonical form leaves
-    /// it out, as it does for that default), followed by `, mps.pair_stabilisation X`,
-    /// `, mps.wall_support Y`, `, mps.pressure_regularisation B, mps.regularisation_radius
-    /// R`, `, mps.surface_depth S` and `, mps.corrected_strain_rate true` when the run had
-    /// them on; `None` without a readable manifest.
+    /// it out, as it does for that default), followed by `, mps.KEY VALUE` for each of the
+    /// scheme's stabilisers and switches the run had on (the canonical form holds them only
+    /// then), e.g. `, mps.pair_stabilisation 0.8, mps.exact_projection true`; `None` without a
+    /// readable manifest.
     pub pressure_scheme: Option<String>,
     /// The `build` metadata: crate_version, git_commit, rustc, target, profile.
     pub build: BTreeMap<String, String>,

@@ -1,6 +1,7 @@
 //! The solver's configuration from a manifest and its test's scene.
 use crate::experiment::{Manifest, Scene};
 use crate::manifest::{Fluid, PpePreconditioner, PpeSource, PressureSchemeName};
+use crate::mps::viscosity::StrainRateGradient;
 use crate::mps::{PressureScheme, Rheology, SolverConfig, SourceTerm};
 
 /// The rheology a manifest's fluid section describes, and whether eq. 8's term is on.
@@ -71,10 +72,16 @@ pub fn solver_config<const D: usize>(m: &Manifest, scene: &Scene<D>) -> SolverCo
         pressure_regularisation: m.mps.pressure_regularisation,
         regularisation_radius_m: m.mps.regularisation_radius * l0,
         surface_depth_m: m.mps.surface_depth * l0,
-        corrected_strain_rate: m.mps.corrected_strain_rate,
+        // Validation refuses both on.
+        strain_rate_gradient: if m.mps.quadratic_strain_rate {
+            StrainRateGradient::Quadratic
+        } else if m.mps.corrected_strain_rate {
+            StrainRateGradient::Corrected
+        } else {
+            StrainRateGradient::Plain
+        },
         wall_surface_no_slip: m.mps.wall_surface_no_slip,
         exact_projection: m.mps.exact_projection,
-        quadratic_strain_rate: m.mps.quadratic_strain_rate,
         compressibility_1_pa: m.mps.compressibility_1_pa,
         collision_distance_m: m.mps.collision_distance * l0,
         wall_collision_distance_m: match m.mps.wall_collision_distance {

@@ -16,7 +16,7 @@ use nalgebra::SMatrix;
 /// pairs, sorted by particle.
 pub(super) type GradientRow<const D: usize> = Vec<(u32, Vector<D>)>;
 
-/// Adds `value` at `column` to a row kept as (column, value) pairs, merged after sorting.
+/// A row given as (column, value) pairs, sorted by column with each column's values summed.
 fn merged<T: Copy + std::ops::AddAssign>(mut entries: Vec<(u32, T)>) -> Vec<(u32, T)> {
     // A stable sort keeps each column's contributions in their order of arrival: the sums
     // below are the same on any thread count.

@@ -178,32 +178,26 @@ impl<const D: usize> Solver<D> {
             .then(|| self.gradient_rows(&corrections, &support));
         // -lap(dp) over fluid neighbours and supporting walls: any other wall's increment
         // mirrors the particle's, so its term vanishes.
-        let (matrix, known) = if let Some(gradient) = &gradient {
-            let known: Vec<f64> = (0..p.len())
-                .map(|j| {
-                    if surface_on {
-                        surface_value[j] - p.pressure_pa[j]
-                    } else {
-                        -p.pressure_pa[j]
-                    }
-                })
-                .collect();
-            self.exact_ppe(dt_s, &rows, &unknown_of, gradient, &known)
-        } else {
-            self.assemble_ppe(
+        // The known increments: p_s - p^n on the surface (-p^n as it stands when the surface
+        // holds 0: the same bits as before the option).
+        let known: Vec<f64> = (0..p.len())
+            .map(|j| {
+                if surface_on {
+                    surface_value[j] - p.pressure_pa[j]
+                } else {
+                    -p.pressure_pa[j]
+                }
+            })
+            .collect();
+        let (matrix, known) = match &gradient {
+            Some(gradient) => self.exact_ppe(dt_s, &rows, &unknown_of, gradient, &known),
+            None => self.assemble_ppe(
                 dt_s,
                 &rows,
                 &unknown_of,
                 |j| is_fluid(j) || support[j],
-                // (-p^n as it stands when the surface holds 0: the same bits as before the option.)
-                |j| {
-                    if surface_on {
-                        surface_value[j] - p.pressure_pa[j]
-                    } else {
-                        -p.pressure_pa[j]
-                    }
-                },
-            )
+                |j| known[j],
+            ),
         };
         let rhs: Vec<f64> = source.iter().zip(&known).map(|(s, k)| s + k).collect();
         // The increment is small once the carried pressure has settled: start from zero.
@@ -386,35 +380,30 @@ impl<const D: usize> Solver<D> {
         let scale = self.config.density_kg_m3 * g_norm * depth;
         // "Above": more than a quarter spacing higher than i.
         let above_m = 0.25 * self.config.spacing_m;
-        (0..p.len())
-            .into_par_iter()
-            .with_min_len(PARTICLES_PER_TASK)
-            .with_max_len(PARTICLES_PER_TASK)
-            .map(|i| {
-                if !surface[i] {
-                    return 0.0;
+        map_particles(p.len(), |i| {
+            if !surface[i] {
+                return 0.0;
+            }
+            let mut inward = Vector::<D>::zeros();
+            for &j in nb.of(i) {
+                let j = j as usize;
+                let r = nb.displacement(&p.position_m, i, j);
+                if p.kind[j] != ParticleKind::Fluid && -r.dot(&down) > above_m {
+                    continue;
                 }
-                let mut inward = Vector::<D>::zeros();
-                for &j in nb.of(i) {
-                    let j = j as usize;
-                    let r = nb.displacement(&p.position_m, i, j);
-                    if p.kind[j] != ParticleKind::Fluid && -r.dot(&down) > above_m {
-                        continue;
-                    }
-                    let d = r.norm();
-                    let w = weight(d, self.refs.radius_n_m);
-                    if w > 0.0 {
-                        inward += r * (w / d);
-                    }
+                let d = r.norm();
+                let w = weight(d, self.refs.radius_n_m);
+                if w > 0.0 {
+                    inward += r * (w / d);
                 }
-                let length = inward.norm();
-                if length == 0.0 {
-                    return 0.0;
-                }
-                // -n . g/|g| with n = -inward/|inward|.
-                scale * (inward / length).dot(&down).max(0.0)
-            })
-            .collect()
+            }
+            let length = inward.norm();
+            if length == 0.0 {
+                return 0.0;
+            }
+            // -n . g/|g| with n = -inward/|inward|.
+            scale * (inward / length).dot(&down).max(0.0)
+        })
     }
 
     /// Whether particle i has a neighbour of `kind` closer than `wall_support_m` (false when
