@@ -157,8 +157,6 @@ pub fn run_sweep(
         .workers
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
         .clamp(1, n.max(1));
-    let next = AtomicUsize::new(0);
-    let done: Mutex<Vec<PointOutcome>> = Mutex::new(Vec::with_capacity(n));
     let run_options = RunOptions {
         out_dir: dir.clone(),
         threads: Some(1),
@@ -167,31 +165,51 @@ pub fn run_sweep(
         max_particles: options.max_particles,
         overwrite: options.overwrite,
     };
+    let points: Vec<&Resolved> = mine.iter().map(|&k| &sweep.points[k].resolved).collect();
+    let outcomes = run_points(&points, &run_options, workers, &|k, result, start| {
+        let index = mine[k];
+        let outcome = PointOutcome {
+            index,
+            label: sweep.points[index].label(),
+            result,
+            start,
+        };
+        on_done(&outcome);
+        outcome
+    });
+    (dir, outcomes)
+}
+
+/// Runs `points` with [`run_point`] on `workers` threads, each taking the next point in
+/// order. `finish(k, result, start)` is called as point `k` finishes, one call at a time;
+/// its values come back in the order of `points`.
+pub(crate) fn run_points<T: Send>(
+    points: &[&Resolved],
+    options: &RunOptions,
+    workers: usize,
+    finish: &(dyn Fn(usize, Result<RunResult, RunError>, PointStart) -> T + Sync),
+) -> Vec<T> {
+    let next = AtomicUsize::new(0);
+    let done: Mutex<Vec<(usize, T)>> = Mutex::new(Vec::with_capacity(points.len()));
     std::thread::scope(|s| {
-        for _ in 0..workers {
+        for _ in 0..workers.clamp(1, points.len().max(1)) {
             s.spawn(|| {
                 loop {
-                    let Some(&index) = mine.get(next.fetch_add(1, Ordering::Relaxed)) else {
+                    let k = next.fetch_add(1, Ordering::Relaxed);
+                    let Some(resolved) = points.get(k) else {
                         break;
                     };
-                    let point = &sweep.points[index];
-                    let (result, start) = run_point(&point.resolved, &run_options);
-                    let outcome = PointOutcome {
-                        index,
-                        label: point.label(),
-                        result,
-                        start,
-                    };
+                    let (result, start) = run_point(resolved, options);
                     let mut done = done.lock().unwrap_or_else(|e| e.into_inner());
-                    on_done(&outcome);
-                    done.push(outcome);
+                    let value = finish(k, result, start);
+                    done.push((k, value));
                 }
             });
         }
     });
-    let mut outcomes = done.into_inner().unwrap_or_else(|e| e.into_inner());
-    outcomes.sort_by_key(|o| o.index);
-    (dir, outcomes)
+    let mut done = done.into_inner().unwrap_or_else(|e| e.into_inner());
+    done.sort_by_key(|(k, _)| *k);
+    done.into_iter().map(|(_, v)| v).collect()
 }
 
 /// One point: its finished file taken as it is, an interrupted or killed run of it resumed,

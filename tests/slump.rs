@@ -268,7 +268,12 @@ fn coarse_spread_matches_the_closed_form() {
     // layer (l0) and is placed to within half a spacing; a quarter spacing more for the
     // surface particles' offsets from their layer. MEASURED: worst 13.3 mm = 0.53 l0 (the
     // two-particle centre, 41-43 mm against 33-36 mm).
-    let profile = mps_runner::report::slump_profile(&run).unwrap();
+    let state = run.states.last().unwrap();
+    let particles = mps_runner::checkpoint::particles_from_message::<3>(state).unwrap();
+    let mps_runner::experiment::SceneSpec::Slump(scene) = &m.scene else {
+        panic!("not a slump run")
+    };
+    let profile = scene.profile(m, &particles, state.time_s).unwrap();
     let mut worst = 0.0f64;
     for q in &profile.points {
         worst = worst.max((q.measured_m - q.closed_form_m).abs());

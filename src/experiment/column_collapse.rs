@@ -1,4 +1,4 @@
-//! Column collapse (validation, DESIGN.md section 5): a Bingham column in the dam-break tank
+//! Column collapse (validation, docs/design.md section 5): a Bingham column in the dam-break tank
 //! collapses against the wall at x = 0 and comes to rest as a heap whose length has a closed
 //! form from lubrication theory, L = (3A/2)^(2/3) (rho g / (2 tau_y))^(1/3) for a
 //! cross-section A, with the surface h = sqrt(2 tau_y d / (rho g)) at a distance d back from
@@ -19,6 +19,13 @@ pub struct ColumnCollapse {
 }
 
 impl Experiment for ColumnCollapse {
+    fn stiffening_response(&self, m: &Manifest, metric: &str) -> Option<super::Response> {
+        match metric {
+            "heap_length_m" => Some(super::Response::FlowMeasure),
+            _ => super::crossing_time(&self.crossings(m), metric),
+        }
+    }
+
     fn check(&self, m: &Manifest, c: &mut Checker) {
         check_tank(&self.tank, m, c);
         if yield_stress_pa(&m.fluid) <= 0.0 {

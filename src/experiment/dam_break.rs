@@ -39,6 +39,13 @@ impl Default for DamBreak {
 }
 
 impl Experiment for DamBreak {
+    fn stiffening_response(&self, m: &Manifest, metric: &str) -> Option<super::Response> {
+        match metric {
+            "front_position_m" => Some(super::Response::FlowMeasure),
+            _ => super::crossing_time(&self.crossings(m), metric),
+        }
+    }
+
     fn check(&self, m: &Manifest, c: &mut Checker) {
         check_tank(self, m, c);
     }

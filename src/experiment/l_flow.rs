@@ -44,6 +44,13 @@ impl Default for LFlow {
 }
 
 impl Experiment for LFlow {
+    fn stiffening_response(&self, m: &Manifest, metric: &str) -> Option<super::Response> {
+        match metric {
+            "l_flow_value_m" => Some(super::Response::FlowMeasure),
+            _ => super::crossing_time(&self.crossings(m), metric),
+        }
+    }
+
     fn check(&self, m: &Manifest, c: &mut Checker) {
         let mut dims = vec![
             ("scene.vertical_width_m", self.vertical_width_m),

@@ -3,18 +3,20 @@
 //! rocks (rock-filled concrete). Without spheres the box is an L-box, whose free surface at
 //! rest has a closed form (Nguyen, Roussel & Coussot 2006).
 //!
-//! Geometry (README, *The L-B box*): x along the box from the inner back wall of the
+//! Geometry (docs/validation.md, *The L-B box*): x along the box from the inner back wall of the
 //! vertical part, y across it (inner width `width_m`), z up from the floor. The vertical part
 //! is x in [0, vertical_width_m], walls up to `vertical_height_m`, open on top; the
 //! horizontal part runs on to x = vertical_width_m + channel_length_m under a lid at
 //! `channel_height_m`. Lengths are snapped to whole lattice cells, as in the L-flow box.
 //! The spheres are static solids of wall and dummy layers; the inlet is a disc in the plane
 //! z = `inlet_height_m` pouring downwards.
+mod profile;
+
 use super::boundaries::{fill_solid, taken_cells};
 use super::geometry::container::{CellBox, add_walls, l_box_parts};
 use super::geometry::lattice::cells;
 use super::geometry::shapes::Shape;
-use super::{Experiment, Manifest, Scene, yield_stress_pa};
+use super::{Experiment, Manifest, Scene, SurfaceProfile, yield_stress_pa};
 use crate::manifest::validate::{Checker, POSITIVE, fmt_num};
 use crate::mps::particles::cell_volume;
 use crate::mps::{Inlet, ParticleKind, Particles, Vector};
@@ -24,7 +26,7 @@ use std::collections::BTreeMap;
 /// Most spheres (each costs a scan of its cells).
 pub const MAX_SPHERES: usize = 256;
 
-/// `scene: {kind: lb_box}`, 3D only. Defaults: README, *The L-B box*.
+/// `scene: {kind: lb_box}`, 3D only. Defaults: docs/validation.md, *The L-B box*.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct LbBox {
@@ -86,6 +88,22 @@ impl Default for LbBox {
 const SURFACE_SHARES: [(&str, f64); 3] = [("x25", 0.25), ("x50", 0.5), ("x75", 0.75)];
 
 impl Experiment for LbBox {
+    fn stiffening_response(&self, m: &Manifest, metric: &str) -> Option<super::Response> {
+        match metric {
+            "filling_distance_m" | "filling_rate" => Some(super::Response::FlowMeasure),
+            _ => super::crossing_time(&self.crossings(m), metric),
+        }
+    }
+
+    fn surface_profile(
+        &self,
+        m: &Manifest,
+        particles: &Particles<3>,
+        time_s: f64,
+        title: &str,
+    ) -> Option<Result<SurfaceProfile, String>> {
+        Some(self.profile(m, particles, time_s).map(|p| p.figure(title)))
+    }
     fn check(&self, m: &Manifest, c: &mut Checker) {
         super::require_3d(m, c, "lb_box", "a circular inlet, spheres");
         let dims = [
@@ -289,8 +307,8 @@ impl Experiment for LbBox {
         names
     }
 
-    /// README, *The L-B box*: poured volume, filling distance, filling rate, surface heights
-    /// and (no spheres) the L-box closed forms.
+    /// docs/validation.md, *The L-B box*: poured volume, filling distance, filling rate, surface
+    /// heights and (no spheres) the L-box closed forms.
     fn metrics<const D: usize>(
         &self,
         m: &Manifest,
@@ -540,86 +558,7 @@ pub fn heap_length_m(k_m: f64, width_m: f64, volume_m3: f64) -> f64 {
     closed_form_distance_m(k_m, width_m, h)
 }
 
-/// One station of an L-box surface profile.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct ProfilePoint {
-    /// Distance back from the front, metres.
-    pub d_m: f64,
-    /// x of the station, metres.
-    pub x_m: f64,
-    /// Top particle within l0/2 of x, plus l0/2.
-    pub measured_m: f64,
-    /// h(d) of the closed form (no spheres and a yield stress; else NaN).
-    pub closed_form_m: f64,
-}
-
-/// The free surface of an L-B box state along the box: every spacing from the front back to
-/// the back wall.
-#[derive(Debug, Clone, PartialEq)]
-pub struct LbProfile {
-    pub time_s: f64,
-    pub spacing_m: f64,
-    pub width_m: f64,
-    /// tau_0/(rho g), metres.
-    pub k_m: f64,
-    pub front_m: f64,
-    pub gate_x_m: f64,
-    /// Closed-form heap length from the back wall for the fluid's volume (NaN with spheres).
-    pub closed_form_front_m: f64,
-    pub points: Vec<ProfilePoint>,
-}
-
-impl LbBox {
-    /// The surface profile of a state (the figure and table of `runner profile`).
-    pub fn profile(
-        &self,
-        m: &Manifest,
-        particles: &Particles<3>,
-        time_s: f64,
-    ) -> Result<LbProfile, String> {
-        let tau = yield_stress_pa(&m.fluid);
-        let l0 = m.spacing_m;
-        if particles.fluid_count() == 0 {
-            return Err("the state holds no concrete yet".into());
-        }
-        let g = self.lattice(l0);
-        let k_m = tau / (m.fluid.density_kg_m3() * m.gravity_m_s2);
-        let closed = tau > 0.0 && self.sphere_centres_m.is_empty();
-        let front_m = super::front_position_m(particles, l0);
-        let volume = particles.fluid_count() as f64 * cell_volume(l0, 3);
-        let closed_form_front_m = if closed {
-            heap_length_m(k_m, g.width_m, volume)
-        } else {
-            f64::NAN
-        };
-        // Stations at the lattice's cell centres (l0/2, 3 l0/2, ...) up to the front.
-        let points = (0..)
-            .map(|k| (k as f64 + 0.5) * l0)
-            .take_while(|&x| x < front_m)
-            .map(|x| ProfilePoint {
-                d_m: front_m - x,
-                x_m: x,
-                measured_m: surface_height_m(particles, l0, x),
-                closed_form_m: if closed {
-                    closed_form_height_m(k_m, g.width_m, front_m - x)
-                } else {
-                    f64::NAN
-                },
-            })
-            .filter(|q| q.measured_m > 0.0)
-            .collect();
-        Ok(LbProfile {
-            time_s,
-            spacing_m: l0,
-            width_m: g.width_m,
-            k_m,
-            front_m,
-            gate_x_m: g.gate_x_m,
-            closed_form_front_m,
-            points,
-        })
-    }
-}
+pub use profile::{LbProfile, ProfilePoint};
 
 #[cfg(test)]
 mod tests {

@@ -6,9 +6,12 @@
 //! Data flows one way: manifest (parse, check, hash) -> test module (scene, metrics) -> MPS
 //! core -> recorder. The only place that lists the tests is the `experiments!` invocation
 //! below, which also declares their modules: adding a test is one module plus one line there
-//! (README, "How to add a test").
+//! (docs/tests.md, "How to add a test").
 pub mod boundaries;
 pub mod geometry;
+pub mod profile;
+
+pub use profile::{Curve, SurfaceProfile};
 
 /// Summary metrics that builds before `run.math` (see [`crate::record::MATH`]) computed with
 /// the platform's `pow` (std `powf`): in files without that entry they may differ from this
@@ -86,6 +89,45 @@ pub trait Experiment {
     fn yield_stress_guess_pa(&self, _m: &Manifest, _metric: &str, _value: f64) -> Option<f64> {
         None
     }
+    /// How summary metric `metric` responds when the concrete stiffens (a higher yield stress
+    /// or plastic viscosity), where the test knows: the direction `runner calibrate` steps
+    /// in. By default the test's crossings are flow times and nothing else is known.
+    fn stiffening_response(&self, m: &Manifest, metric: &str) -> Option<Response> {
+        crossing_time(&self.crossings(m), metric)
+    }
+    /// The free surface of a 3D state at `time_s` against the test's closed form (the figure
+    /// and table of `runner profile` and of the report), headed by `title`; `None` for a
+    /// test without one, an error naming what is missing.
+    fn surface_profile(
+        &self,
+        _m: &Manifest,
+        _particles: &Particles<3>,
+        _time_s: f64,
+        _title: &str,
+    ) -> Option<Result<SurfaceProfile, String>> {
+        None
+    }
+}
+
+/// How a summary metric responds when the concrete stiffens
+/// ([`Experiment::stiffening_response`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Response {
+    /// A flow measure (a spread, a filling distance or rate): falls as the yield stress or
+    /// the plastic viscosity rises.
+    FlowMeasure,
+    /// A flow time (t500, t200): rises as either rises, in proportion to the plastic
+    /// viscosity (the viscous time scale mu_p / (rho g H)).
+    FlowTime,
+}
+
+/// [`Response::FlowTime`] when `metric` is one of `crossings` (each the time at which a flow
+/// measure reaches a threshold).
+pub fn crossing_time(crossings: &[Crossing], metric: &str) -> Option<Response> {
+    crossings
+        .iter()
+        .any(|c| c.name == metric)
+        .then_some(Response::FlowTime)
 }
 
 /// Declares the tests: their modules, the [`SceneSpec`] enum (one variant per `scene.kind`)
@@ -180,6 +222,20 @@ impl SceneSpec {
     /// The summary metric `runner verify --trend` follows by default for this test.
     pub fn trend_metric(&self) -> &'static str {
         with_experiment!(self, e => e.trend_metric())
+    }
+    /// See [`Experiment::stiffening_response`].
+    pub fn stiffening_response(&self, m: &Manifest, metric: &str) -> Option<Response> {
+        with_experiment!(self, e => e.stiffening_response(m, metric))
+    }
+    /// See [`Experiment::surface_profile`].
+    pub fn surface_profile(
+        &self,
+        m: &Manifest,
+        particles: &Particles<3>,
+        time_s: f64,
+        title: &str,
+    ) -> Option<Result<SurfaceProfile, String>> {
+        with_experiment!(self, e => e.surface_profile(m, particles, time_s, title))
     }
 }
 
@@ -380,7 +436,7 @@ fn cell_volume_of(length: f64, dimension: usize) -> f64 {
     mps::particles::cell_volume(length, dimension)
 }
 
-/// Metrics of the experiment at the current state (documented in the README): the front
+/// Metrics of the experiment at the current state (documented in docs/file-format.md): the front
 /// position, which every test reports, and the test's own.
 pub fn experiment_metrics<const D: usize>(
     m: &Manifest,

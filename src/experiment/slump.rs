@@ -14,7 +14,7 @@
 //!   dummies (z from 0 to the cone height; the cone is open at the top and bottom). Built
 //!   last, so the cone is one index range, which the solver lifts.
 use super::geometry::lattice::{cells, centre, for_each_index};
-use super::{Experiment, Manifest, Scene, yield_stress_pa};
+use super::{Curve, Experiment, Manifest, Scene, SurfaceProfile, yield_stress_pa};
 use crate::manifest::validate::{Checker, NON_NEGATIVE, POSITIVE, fmt_num};
 use crate::mps::particles::cell_volume;
 use crate::mps::{ParticleKind, Particles, Path, RigidBody, Vector};
@@ -59,6 +59,25 @@ impl Default for Slump {
 }
 
 impl Experiment for Slump {
+    fn stiffening_response(&self, m: &Manifest, metric: &str) -> Option<super::Response> {
+        match metric {
+            "spread_radius_mean_m"
+            | "spread_radius_min_m"
+            | "spread_radius_max_m"
+            | "spread_diameter_m" => Some(super::Response::FlowMeasure),
+            _ => super::crossing_time(&self.crossings(m), metric),
+        }
+    }
+
+    fn surface_profile(
+        &self,
+        m: &Manifest,
+        particles: &Particles<3>,
+        time_s: f64,
+        title: &str,
+    ) -> Option<Result<SurfaceProfile, String>> {
+        Some(self.profile(m, particles, time_s).map(|p| p.figure(title)))
+    }
     fn check(&self, m: &Manifest, c: &mut Checker) {
         super::require_3d(m, c, "slump", "an axisymmetric cone");
         let dims = [
@@ -130,7 +149,7 @@ impl Experiment for Slump {
     }
 
     /// Spread radius over the octants, the height at the centre, and the Roussel & Coussot
-    /// closed forms for the fluid's volume (README, *Experiment manifests*).
+    /// closed forms for the fluid's volume (docs/manifest.md).
     fn metrics<const D: usize>(
         &self,
         m: &Manifest,
@@ -279,6 +298,57 @@ impl Slump {
             closed_form_radius_m,
             points,
         })
+    }
+}
+
+impl SlumpProfile {
+    /// The table and the figure's curves: the surface, and h(r) for the measured radius and
+    /// for the closed-form radius.
+    pub fn figure(&self, title: &str) -> SurfaceProfile {
+        let (rho, g, tau) = (self.density_kg_m3, self.gravity_m_s2, self.yield_stress_pa);
+        let mut table = format!(
+            "{title} at t = {:.3} s (spacing {} m): spread radius {:.4} m (diameter {:.1} mm), closed form {:.4} m ({:+.1} %)\n",
+            self.time_s,
+            self.spacing_m,
+            self.radius_m,
+            2000.0 * self.radius_m,
+            self.closed_form_radius_m,
+            100.0 * (self.radius_m / self.closed_form_radius_m - 1.0)
+        );
+        table += "r_m       h_measured_m  h_closed_form_m  difference_m\n";
+        for q in &self.points {
+            table += &format!(
+                "{:<9.4} {:<13.4} {:<16.4} {:+.4}\n",
+                q.r_m,
+                q.measured_m,
+                q.closed_form_m,
+                q.measured_m - q.closed_form_m
+            );
+        }
+        let fine = |radius: f64| -> Vec<(f64, f64)> {
+            (0..=200)
+                .map(|k| radius * f64::from(k) / 200.0)
+                .map(|r| (r, closed_form_height_m(rho, g, tau, radius, r)))
+                .collect()
+        };
+        SurfaceProfile {
+            table,
+            x_label: "r [m]",
+            spacing_m: self.spacing_m,
+            time_s: self.time_s,
+            surface: Curve {
+                label: "MPS surface (top particle + l0/2)".into(),
+                points: self.points.iter().map(|q| (q.r_m, q.measured_m)).collect(),
+            },
+            closed_at_measured: Some(Curve {
+                label: format!("h(r), measured R = {:.3} m", self.radius_m),
+                points: fine(self.radius_m),
+            }),
+            closed_for_volume: Some(Curve {
+                label: format!("h(r), closed-form R = {:.3} m", self.closed_form_radius_m),
+                points: fine(self.closed_form_radius_m),
+            }),
+        }
     }
 }
 

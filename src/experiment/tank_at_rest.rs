@@ -1,7 +1,7 @@
 //! Tank at rest (issue "A quiet core"): a closed tank filled to a flat level, started at
 //! rest. The exact answer is that nothing moves: the speed stays zero, the pressure is
 //! hydrostatic, p = rho g (H - y), and the surface stays where it is. What a scheme makes of
-//! it measures its noise (`shared/reference/quiet-mps.md`). Any fluid model: with a yield
+//! it measures its noise (docs/validation.md, "Holding still"). Any fluid model: with a yield
 //! stress the layer must also stay rigid.
 use super::dam_break::{self, DamBreak};
 use super::geometry::lattice::cells;

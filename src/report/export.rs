@@ -10,7 +10,7 @@ use serde_json::{Map, Value, json};
 
 use super::{DIAGNOSTICS_FIELDS, Result, diagnostics_value, run_files};
 use crate::proto::mps::v1::Summary;
-use crate::record::{META_MANIFEST, RunFile, read_run};
+use crate::record::{RunFile, read_run};
 use crate::verify::trend::{flatten, varying_keys};
 
 /// One cell of a [`Table`].
@@ -156,12 +156,7 @@ impl RunRow {
             .as_ref()
             .map(|s| s.experiment_sha256.clone())
             .filter(|h| !h.is_empty())
-            .or_else(|| {
-                run.metadata
-                    .get(META_MANIFEST)
-                    .and_then(|m| m.get("experiment_sha256"))
-                    .cloned()
-            });
+            .or_else(|| run.manifest_field("experiment_sha256").map(str::to_string));
         Self {
             file,
             experiment_sha256,

@@ -12,6 +12,7 @@ pub mod info;
 pub mod page;
 pub mod plot;
 pub mod png;
+pub mod profile;
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -20,7 +21,7 @@ use serde_json::Value;
 
 use crate::manifest::sweep::lookup;
 use crate::proto::mps::v1::Diagnostics;
-use crate::record::{META_MANIFEST, RecordError, RunFile, read_run};
+use crate::record::{RecordError, RunFile, read_run};
 use plot::Series;
 
 /// Why a report could not be made.
@@ -92,8 +93,7 @@ pub fn diagnostics_series(run: &RunFile, name: &str) -> Vec<(f64, f64)> {
 
 /// The run's resolved manifest (its stored canonical form) as JSON.
 pub fn canonical_manifest(run: &RunFile) -> Option<Value> {
-    let text = run.metadata.get(META_MANIFEST)?.get("canonical")?;
-    serde_json::from_str(text).ok()
+    serde_json::from_str(run.manifest_field("canonical")?).ok()
 }
 
 /// The value at dotted `key` of the run's resolved manifest.
@@ -103,14 +103,10 @@ pub fn manifest_value(run: &RunFile, key: &str) -> Option<Value> {
 
 /// `name (short hash)` of a run, for titles.
 pub fn run_title(run: &RunFile) -> String {
-    let meta = run.metadata.get(META_MANIFEST);
-    let name = meta
-        .and_then(|m| m.get("name"))
-        .map_or("run", |s| s.as_str());
-    let hash = meta
-        .and_then(|m| m.get("experiment_sha256"))
-        // Read from the file: a damaged value may be short or cut a character in two.
-        .map_or("", |s| s.get(..12).unwrap_or(s));
+    let name = run.manifest_field("name").unwrap_or("run");
+    let hash = run
+        .manifest_field("experiment_sha256")
+        .map_or("", crate::manifest::canonical::short_hash);
     format!("{name} {hash}")
 }
 
@@ -508,253 +504,7 @@ pub fn snapshot(
     Ok(out)
 }
 
-pub use crate::experiment::slump::{ProfilePoint, SlumpProfile};
-
-/// The run's manifest and its last checkpoint's particles (3D).
-fn last_state_3d(run: &RunFile) -> Result<(crate::experiment::Resolved, Particles3, f64)> {
-    let resolved = crate::restore::manifest_of(run)
-        .map_err(|e| ReportError::Input(format!("the run's manifest: {e}")))?;
-    let state = run
-        .states
-        .last()
-        .ok_or_else(|| ReportError::Input("the run has no checkpoint".into()))?;
-    let particles = crate::checkpoint::particles_from_message::<3>(state)
-        .map_err(|e| ReportError::Input(format!("last checkpoint: {e}")))?;
-    Ok((resolved, particles, state.time_s))
-}
-
-type Particles3 = crate::mps::Particles<3>;
-
-/// Profile of the last checkpoint of a slump-flow run.
-pub fn slump_profile(run: &RunFile) -> Result<SlumpProfile> {
-    let (resolved, particles, time_s) = last_state_3d(run)?;
-    let m = &resolved.manifest;
-    let crate::experiment::SceneSpec::Slump(spec) = &m.scene else {
-        return Err(not_profiled(&m.name));
-    };
-    spec.profile(m, &particles, time_s)
-        .map_err(ReportError::Input)
-}
-
-fn not_profiled(name: &str) -> ReportError {
-    ReportError::Input(format!(
-        "run `{name}` is neither a slump-flow run (scene.kind slump) nor an L-B box run (scene.kind lb_box)"
-    ))
-}
-
-/// Profile of the last checkpoint of an L-B box (or L-box) run.
-pub fn lb_profile(run: &RunFile) -> Result<crate::experiment::lb_box::LbProfile> {
-    let (resolved, particles, time_s) = last_state_3d(run)?;
-    let m = &resolved.manifest;
-    let crate::experiment::SceneSpec::LbBox(spec) = &m.scene else {
-        return Err(not_profiled(&m.name));
-    };
-    spec.profile(m, &particles, time_s)
-        .map_err(ReportError::Input)
-}
-
-/// `runner profile`: the surface at rest of a slump-flow or an L-B box run against its
-/// closed form, as a table (returned) and an SVG plot (default `<run>-profile.svg`).
-pub fn profile(mcap: &Path, out: Option<&Path>) -> Result<(PathBuf, String)> {
-    let out = out.map_or_else(|| beside(mcap, "-profile.svg"), Path::to_path_buf);
-    let run = read(mcap)?;
-    let fig = profile_figure(&run)?;
-    let title = format!("{}: surface at t = {:.2} s", run_title(&run), fig.time_s);
-    let series: Vec<Series> = std::iter::once(fig.surface)
-        .chain(fig.closed_at_measured)
-        .chain(fig.closed_for_volume)
-        .collect();
-    plot::line_plot(&out, &title, fig.x_label, "h [m]", &series, false)?;
-    Ok((out, fig.table))
-}
-
-/// `runner profile RUN RUN...`: several runs of one test (e.g. one experiment at several
-/// spacings) in one figure: each run's surface, and the closed form for the first run's
-/// volume; the table is each run's table in turn. Default figure: `<first run>-profiles.svg`.
-pub fn profiles(mcaps: &[PathBuf], out: Option<&Path>) -> Result<(PathBuf, String)> {
-    let [first, ..] = mcaps else {
-        return Err(ReportError::Input("no run file given".into()));
-    };
-    let out = out.map_or_else(|| beside(first, "-profiles.svg"), Path::to_path_buf);
-    let figs = mcaps
-        .iter()
-        .map(|f| read(f).and_then(|run| profile_figure(&run).map(|fig| (fig, run))))
-        .collect::<Result<Vec<_>>>()?;
-    let x_label = figs[0].0.x_label;
-    if let Some((_, run)) = figs.iter().find(|(f, _)| f.x_label != x_label) {
-        return Err(ReportError::Input(format!(
-            "{} is not the same test as {}: one figure takes runs of one kind (slump or L-B box)",
-            run_title(run),
-            run_title(&figs[0].1)
-        )));
-    }
-    let mut series: Vec<Series> = figs
-        .iter()
-        .map(|(f, run)| Series {
-            label: format!(
-                "{}: MPS, l0 = {} mm, t = {:.1} s",
-                run_title(run),
-                1000.0 * f.spacing_m,
-                f.time_s
-            ),
-            points: f.surface.points.clone(),
-        })
-        .collect();
-    if let Some(closed) = &figs[0].0.closed_for_volume {
-        series.push(Series {
-            label: format!("{} (volume of the first run)", closed.label),
-            points: closed.points.clone(),
-        });
-    }
-    let title = format!("{} runs: surface against the closed form", figs.len());
-    plot::line_plot(&out, &title, x_label, "h [m]", &series, false)?;
-    let table = figs
-        .iter()
-        .map(|(f, _)| f.table.as_str())
-        .collect::<Vec<_>>()
-        .join("\n");
-    Ok((out, table))
-}
-
-/// One run's profile: its table, and the series of its figure.
-struct ProfileFigure {
-    table: String,
-    x_label: &'static str,
-    spacing_m: f64,
-    time_s: f64,
-    /// The MPS surface.
-    surface: Series,
-    /// The closed form for the measured front or radius (none without one, e.g. spheres).
-    closed_at_measured: Option<Series>,
-    /// The closed form for the run's volume: its own front or radius.
-    closed_for_volume: Option<Series>,
-}
-
-fn profile_figure(run: &RunFile) -> Result<ProfileFigure> {
-    match canonical_manifest(run)
-        .as_ref()
-        .and_then(|v| v.get("scene"))
-        .and_then(|v| v.get("kind"))
-        .and_then(|v| v.as_str())
-    {
-        Some("lb_box") => lb_box_profile(run),
-        _ => slump_profile_figure(run),
-    }
-}
-
-/// The L-B box surface h(x) along the box against the L-box closed form (no spheres).
-fn lb_box_profile(run: &RunFile) -> Result<ProfileFigure> {
-    use crate::experiment::lb_box::closed_form_height_m;
-    let p = lb_profile(run)?;
-    let closed = p.closed_form_front_m.is_finite();
-    let mut table = format!(
-        "{} at t = {:.3} s (spacing {} m, W = {} m, k = tau_0/(rho g) = {:.3} mm): front at x = {:.4} m, filling distance {:.4} m",
-        run_title(run),
-        p.time_s,
-        p.spacing_m,
-        p.width_m,
-        1000.0 * p.k_m,
-        p.front_m,
-        p.front_m - p.gate_x_m
-    );
-    if closed {
-        table += &format!(
-            "; closed form for this volume {:.4} m ({:+.1} %)",
-            p.closed_form_front_m - p.gate_x_m,
-            100.0 * ((p.front_m - p.gate_x_m) / (p.closed_form_front_m - p.gate_x_m) - 1.0)
-        );
-    }
-    table += "\nx_m       d_m       h_measured_m  h_closed_form_m  difference_m\n";
-    for q in &p.points {
-        table += &format!(
-            "{:<9.4} {:<9.4} {:<13.4} {:<16.4} {:+.4}\n",
-            q.x_m,
-            q.d_m,
-            q.measured_m,
-            q.closed_form_m,
-            q.measured_m - q.closed_form_m
-        );
-    }
-    let fine = |front: f64| -> Vec<(f64, f64)> {
-        (0..=400)
-            .map(|k| front * f64::from(k) / 400.0)
-            .map(|x| (x, closed_form_height_m(p.k_m, p.width_m, front - x)))
-            .collect()
-    };
-    Ok(ProfileFigure {
-        table,
-        x_label: "x from the back wall [m]",
-        spacing_m: p.spacing_m,
-        time_s: p.time_s,
-        surface: Series {
-            label: "MPS surface (top particle + l0/2)".into(),
-            points: p.points.iter().map(|q| (q.x_m, q.measured_m)).collect(),
-        },
-        closed_at_measured: closed.then(|| Series {
-            label: format!("L-box closed form, measured front x = {:.3} m", p.front_m),
-            points: fine(p.front_m),
-        }),
-        closed_for_volume: closed.then(|| Series {
-            label: format!(
-                "L-box closed form for the volume, front x = {:.3} m",
-                p.closed_form_front_m
-            ),
-            points: fine(p.closed_form_front_m),
-        }),
-    })
-}
-
-/// The slump profile as a table and the series of a plot with the closed form for the
-/// measured radius and for the closed-form radius.
-fn slump_profile_figure(run: &RunFile) -> Result<ProfileFigure> {
-    use crate::experiment::slump::closed_form_height_m;
-    let p = slump_profile(run)?;
-    let (rho, g, tau) = (p.density_kg_m3, p.gravity_m_s2, p.yield_stress_pa);
-    let mut table = format!(
-        "{} at t = {:.3} s (spacing {} m): spread radius {:.4} m (diameter {:.1} mm), closed form {:.4} m ({:+.1} %)\n",
-        run_title(run),
-        p.time_s,
-        p.spacing_m,
-        p.radius_m,
-        2000.0 * p.radius_m,
-        p.closed_form_radius_m,
-        100.0 * (p.radius_m / p.closed_form_radius_m - 1.0)
-    );
-    table += "r_m       h_measured_m  h_closed_form_m  difference_m\n";
-    for q in &p.points {
-        table += &format!(
-            "{:<9.4} {:<13.4} {:<16.4} {:+.4}\n",
-            q.r_m,
-            q.measured_m,
-            q.closed_form_m,
-            q.measured_m - q.closed_form_m
-        );
-    }
-    let fine = |radius: f64| -> Vec<(f64, f64)> {
-        (0..=200)
-            .map(|k| radius * f64::from(k) / 200.0)
-            .map(|r| (r, closed_form_height_m(rho, g, tau, radius, r)))
-            .collect()
-    };
-    Ok(ProfileFigure {
-        table,
-        x_label: "r [m]",
-        spacing_m: p.spacing_m,
-        time_s: p.time_s,
-        surface: Series {
-            label: "MPS surface (top particle + l0/2)".into(),
-            points: p.points.iter().map(|q| (q.r_m, q.measured_m)).collect(),
-        },
-        closed_at_measured: Some(Series {
-            label: format!("h(r), measured R = {:.3} m", p.radius_m),
-            points: fine(p.radius_m),
-        }),
-        closed_for_volume: Some(Series {
-            label: format!("h(r), closed-form R = {:.3} m", p.closed_form_radius_m),
-            points: fine(p.closed_form_radius_m),
-        }),
-    })
-}
+pub use profile::{profile, profile_if_any, profiles};
 
 /// `runner draw`: the particle set at t = 0 of a manifest (walls, dummies, fluid, and each
 /// inlet's cross-section as `inlet`) as sections: in 3D one through the plane y = `at_y_m`

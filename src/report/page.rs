@@ -155,18 +155,15 @@ fn run_report(path: &Path, options: &ReportOptions) -> Result<Report> {
         f.add(&svg, "the last frame from above, by height".into(), drawn);
     }
 
-    // The test's own figure.
-    let kind = super::manifest_value(&run, "scene.kind")
-        .and_then(|v| v.as_str().map(str::to_string))
-        .unwrap_or_default();
-    if kind == "slump" || kind == "lb_box" {
-        let svg = f.svg("profile");
-        let drawn = super::profile(path, Some(&svg));
-        f.add(
+    // The test's own figure, where it has one.
+    let svg = f.svg("profile");
+    match super::profile_if_any(path, Some(&svg)) {
+        Ok(None) => {}
+        drawn => f.add(
             &svg,
             "the surface of the last checkpoint against the closed form".into(),
             drawn,
-        );
+        ),
     }
 
     let title = format!("Run report: {}", super::run_title(&run));
