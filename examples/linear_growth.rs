@@ -2,7 +2,7 @@
 //! disturbance of a still column of water in a walled box, by matrix-free power iteration on
 //! the step map (each iteration steps the rest state plus eps times the current disturbance
 //! once, at a fixed dt). Above 1 the rest state is unstable. A few seconds in 2D instead of a
-//! run that fails seconds of simulated time later (README, "Holding still").
+//! run that fails seconds of simulated time later (docs/validation.md, "Holding still").
 //!
 //! Usage: cargo run --release --example linear_growth -- [--dim 2|3] [--width CELLS]
 //!        [--depth ROWS] [--spacing M] [--beta B] [--pair D] [--wall W] [--compression G]

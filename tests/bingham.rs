@@ -1,4 +1,4 @@
-//! The Bingham viscosity model against closed forms (DESIGN.md sections 4 and 5).
+//! The Bingham viscosity model against closed forms (docs/design.md sections 4 and 5).
 mod common;
 use mps_runner::mps::grid::{KernelPairs, Neighbours};
 use mps_runner::mps::kernel::RefValues;
@@ -170,7 +170,7 @@ fn bingham_poiseuille_plug_matches_closed_form() {
             "{name}: non-flowing particles up to |y| = {non_flowing:.4} (the gradient model's support blurs the plug edge)"
         );
         let u_max = u.iter().cloned().fold(0.0, f64::max);
-        // The regularisation (mu_r = 1000 mu_p) is worth 1-2 % (DESIGN.md section 4); measured
+        // The regularisation (mu_r = 1000 mu_p) is worth 1-2 % (docs/design.md section 4); measured
         // 0.85 % for the plug velocity and for the worst point of the profile, both forms.
         let tolerance = 0.02;
         let error = (u_max - plug_velocity).abs() / plug_velocity;

@@ -1,17 +1,12 @@
 //! The `runner` binary end to end: outputs, exit codes, error messages.
 mod common;
-use assert_cmd::Command;
 use mps_runner::record::read_run;
 use std::path::PathBuf;
-
-fn runner() -> Command {
-    Command::cargo_bin("runner").unwrap()
-}
 
 #[test]
 fn hash_prints_64_hex_digits_and_follows_overrides() {
     let exp = common::experiment("dam_break_2d.yaml");
-    let out = runner()
+    let out = common::runner()
         .arg("hash")
         .arg(&exp)
         .assert()
@@ -25,7 +20,7 @@ fn hash_prints_64_hex_digits_and_follows_overrides() {
         hash.chars()
             .all(|c| c.is_ascii_hexdigit() && !c.is_ascii_uppercase())
     );
-    let out = runner()
+    let out = common::runner()
         .args(["hash", "--set", "spacing_m=0.02"])
         .arg(&exp)
         .assert()
@@ -40,7 +35,7 @@ fn hash_prints_64_hex_digits_and_follows_overrides() {
 fn run_writes_named_mcap_and_prints_its_path_last() {
     let dir = tempfile::tempdir().unwrap();
     let exp = common::experiment("smoke_2d.yaml");
-    let assert = runner()
+    let assert = common::runner()
         .arg(&exp)
         .arg("--out")
         .arg(dir.path())
@@ -94,7 +89,7 @@ fn bad_manifest_exits_2_naming_field_and_line() {
         .position(|l| l.starts_with("spacing_m:"))
         .unwrap()
         + 1;
-    let assert = runner()
+    let assert = common::runner()
         .arg(&bad)
         .arg("--out")
         .arg(dir.path())
@@ -113,19 +108,19 @@ fn bad_manifest_exits_2_naming_field_and_line() {
 #[test]
 fn unknown_override_and_bad_cli_exit_2() {
     let exp = common::experiment("smoke_2d.yaml");
-    let assert = runner()
+    let assert = common::runner()
         .arg(&exp)
         .args(["--set", "time.endd_s=1"])
         .assert()
         .code(2);
     let stderr = String::from_utf8(assert.get_output().stderr.clone()).unwrap();
     assert!(stderr.contains("time.endd_s"), "{stderr}");
-    runner()
+    common::runner()
         .arg(&exp)
         .args(["--threads", "zero"])
         .assert()
         .code(2);
-    runner().arg("missing.yaml").assert().code(2);
+    common::runner().arg("missing.yaml").assert().code(2);
 }
 
 /// The outside reader (Python `mcap` + `mcap-protobuf-support`) decodes every message of a real
@@ -164,7 +159,7 @@ fn bench_reports_what_its_run_recorded() {
     let exp = common::experiment("smoke_2d.yaml");
     // A diagnostics row at every step (the interval is below any time step) so that the
     // recorded per-step CG iterations can be summed.
-    let assert = runner()
+    let assert = common::runner()
         .arg("bench")
         .arg(&exp)
         .arg("--out")
@@ -229,7 +224,7 @@ fn bench_reports_what_its_run_recorded() {
         builds >= 1.0 && builds <= 2.0 * steps as f64,
         "{builds} list builds in {steps} steps"
     );
-    runner()
+    common::runner()
         .arg("bench")
         .arg(common::experiment("l_flow_sweep.yaml"))
         .assert()
@@ -243,7 +238,7 @@ fn bench_reports_what_its_run_recorded() {
 fn progress_is_plain_lines_when_piped_a_bar_on_a_terminal_and_none_when_quiet() {
     let dir = tempfile::tempdir().unwrap();
     let exp = common::experiment("smoke_2d.yaml");
-    let out = runner()
+    let out = common::runner()
         .arg(&exp)
         .arg("--out")
         .arg(dir.path())
@@ -263,7 +258,7 @@ fn progress_is_plain_lines_when_piped_a_bar_on_a_terminal_and_none_when_quiet() 
     );
     assert!(lines.iter().all(|l| l.contains(" s left")));
 
-    let out = runner()
+    let out = common::runner()
         .arg(&exp)
         .arg("--out")
         .arg(dir.path())
@@ -301,7 +296,7 @@ fn progress_is_plain_lines_when_piped_a_bar_on_a_terminal_and_none_when_quiet() 
 fn run_as_a_subcommand_is_the_plain_run() {
     let dir = tempfile::tempdir().unwrap();
     let exp = common::experiment("smoke_2d.yaml");
-    let out = runner()
+    let out = common::runner()
         .arg("run")
         .arg(&exp)
         .args(["--set", "time.end_s=0.01", "--quiet", "--out"])

@@ -1,5 +1,5 @@
 //! A 2D Bingham column collapsing against a wall comes to rest as the heap of lubrication
-//! theory (DESIGN.md section 5): L = (3A/2)^(2/3) (rho g / (2 tau_y))^(1/3) and
+//! theory (docs/design.md section 5): L = (3A/2)^(2/3) (rho g / (2 tau_y))^(1/3) and
 //! h(d) = sqrt(2 tau_y d / (rho g)) at a distance d back from the front.
 mod common;
 use mps_runner::experiment::SceneSpec;

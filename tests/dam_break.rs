@@ -1,4 +1,4 @@
-//! Newtonian dam break against Martin & Moyce (1952) and the open MPS codes (DESIGN.md
+//! Newtonian dam break against Martin & Moyce (1952) and the open MPS codes (docs/design.md
 //! section 5).
 mod common;
 use mps_runner::experiment::SceneSpec;
@@ -102,7 +102,7 @@ fn front_history_with(spacing_m: f64, end_s: f64, more: &[&str]) -> (f64, Vec<(f
 }
 
 /// No time origin to fit: at t = 0.2 s the open MPS codes MPS-Basic and PolyMPS put the
-/// front of this column at 0.587-0.602 m (at 5 mm; DESIGN.md section 5).
+/// front of this column at 0.587-0.602 m (at 5 mm; docs/design.md section 5).
 #[test]
 fn front_at_fixed_time_matches_open_mps_codes() {
     // 6.25 mm (40 x 80 fluid particles, 5 s on 2 threads): the closest whole-cell spacing
@@ -124,7 +124,7 @@ fn front_at_fixed_time_matches_open_mps_codes() {
 }
 
 /// The incremental (quiet) scheme with its stabilisers (the 2D set) carries the column through the
-/// violent phase, where without them it blows up at the toe at 0.06 s (README, "Holding
+/// violent phase, where without them it blows up at the toe at 0.06 s (docs/validation.md, "Holding
 /// still"), and keeps the front within the band the issue "A quiet core" sets at 5 mm.
 #[test]
 fn stabilised_incremental_scheme_keeps_the_front() {

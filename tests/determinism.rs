@@ -1,4 +1,4 @@
-//! Same manifest + same binary => same state bits, on any thread count (DESIGN.md section 6).
+//! Same manifest + same binary => same state bits, on any thread count (docs/design.md section 6).
 mod common;
 use mps_runner::record::read_run;
 

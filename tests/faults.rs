@@ -2,16 +2,11 @@
 //! its file with outcome `failed` and the reason, keep every checkpoint written before the
 //! fault (and replay to it bit for bit), and exit with code 3.
 mod common;
-use assert_cmd::Command;
 use mps_runner::experiment::{build_scene, load};
 use mps_runner::mps::{ParticleKind, Solver};
 use mps_runner::record::{Outcome, Recorder, read_run};
 use mps_runner::run::{LoopControl, LoopStart, run_header, solver_config, time_loop, time_ns};
 use std::path::{Path, PathBuf};
-
-fn runner() -> Command {
-    Command::cargo_bin("runner").unwrap()
-}
 
 /// smoke_2d with a jet shooting upwards out of the open tank (it reaches 0.8 m, the top of the
 /// domain box, after about 0.1 s).
@@ -31,7 +26,7 @@ fn jet_manifest(dir: &Path) -> PathBuf {
 /// before the fault kept, none after it, and a replay that reproduces them.
 fn assert_fails(manifest: &Path, sets: &[&str], reason: &str) -> String {
     let dir = tempfile::tempdir().unwrap();
-    let mut cmd = runner();
+    let mut cmd = common::runner();
     cmd.arg(manifest)
         .arg("--out")
         .arg(dir.path())
@@ -106,7 +101,7 @@ fn time_step_below_its_minimum_fails_the_run_before_taking_it() {
     assert!(reason.contains("m/s"), "{reason}");
     // The last step, cut short to land on time.end_s, is allowed below the minimum.
     let dir = tempfile::tempdir().unwrap();
-    runner()
+    common::runner()
         .arg(&exp)
         .arg("--out")
         .arg(dir.path())
@@ -127,7 +122,7 @@ fn fluid_leaving_the_domain_beyond_the_limit_fails_the_run() {
     );
     assert!(reason.contains("4 particles have left it"), "{reason}");
     // Without the limit the same run completes with its ghosts counted in the summary.
-    let out = runner()
+    let out = common::runner()
         .arg(&jet)
         .arg("--out")
         .arg(dir.path())

@@ -2,7 +2,7 @@
 //! (tools/foxglove/decode.js: protobufjs `Root.fromDescriptor` on each schema's
 //! FileDescriptorSet, `toObject` with `{defaults: true, longs: BigInt}`, the viewers'
 //! message-path rules) holds what the Rust reader reads, bit for bit, under the plot paths the
-//! README and tools/foxglove/mps-layout.json use.
+//! docs/file-format.md and tools/foxglove/mps-layout.json use.
 //!
 //! Needs Node.js (18+) and npm; `npm ci` fills tools/foxglove/node_modules from the committed
 //! package-lock.json when it is missing. Without node the tests fail and say so.

@@ -2,7 +2,7 @@
 //! pinned before the test modules were moved, issue "One module per workability test"). A
 //! refactor must keep them; a value is re-minted only when a change is meant to alter the
 //! simulation, and the commit that does so says why. Each case runs on 1, 2, 3 and 8 threads
-//! (DESIGN.md section 6: the split of the work never depends on the pool size).
+//! (docs/design.md section 6: the split of the work never depends on the pool size).
 mod common;
 
 /// (experiment file, overrides, final checkpoint SHA-256).
@@ -125,7 +125,7 @@ fn the_3d_wall_collision_constants_are_manifest_fields_with_todays_values() {
     assert_ne!(final_hash(experiment, &off, 2), golden);
 }
 
-/// DESIGN.md section 6: no value the runner records or compares may come from a std
+/// docs/design.md section 6: no value the runner records or compares may come from a std
 /// transcendental function or `powi` (they call the platform's math library, whose last bits
 /// differ between platforms and versions): the library uses `libm` or plain products.
 #[test]

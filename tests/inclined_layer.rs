@@ -6,7 +6,7 @@
 //! Our walls hold zero velocity at the wall particles' centres, l0/2 below the floor's top
 //! (y = 0, where the closed form puts it): the layer shears as one l0/2 deeper. Measured plug
 //! speed against the nominal closed form at 10, 5 and 2.5 mm: +20.1, +12.8, +5.2 %; against
-//! the closed form for h + l0/2: -1.0, +2.2, +0.1 % (README, "Holding still"). With
+//! the closed form for h + l0/2: -1.0, +2.2, +0.1 % (docs/validation.md, "Holding still"). With
 //! `mps.wall_surface_no_slip` the no-slip condition holds at the floor's top instead.
 mod common;
 

@@ -132,7 +132,7 @@ fn full_manifest_parses_and_defaults_are_filled() {
     assert_eq!(d.gravity_m_s2, 9.81);
     assert_eq!(d.time.dt_max_s, 1.0e-3);
     assert_eq!(d.time.courant, 0.2);
-    // The documented defaults (README table), written out rather than compared with the
+    // The documented defaults (docs/manifest.md table), written out rather than compared with the
     // library's own Default.
     assert_eq!(d.mps.source_term, manifest::PpeSource::NumberDensity);
     assert_eq!(

@@ -1,10 +1,11 @@
-//! MPS operators on a regular lattice against exact values (DESIGN.md section 3).
+//! MPS operators on a regular lattice against exact values (docs/design.md section 3).
 use mps_runner::mps::Vector;
 use mps_runner::mps::grid::Neighbours;
 use mps_runner::mps::kernel::{RefValues, weight};
 use mps_runner::mps::multigrid::Multigrid;
 use mps_runner::mps::operators::{gradient, laplacian, number_density};
-use mps_runner::mps::pressure::{CsrMatrix, Preconditioner, solve_pcg, solve_pcg_many};
+use mps_runner::mps::pressure::{Preconditioner, solve_pcg, solve_pcg_many};
+use mps_runner::mps::sparse::CsrMatrix;
 
 /// Square/cubic lattice of side `side` cells with spacing l0; returns positions and the index
 /// of a particle in the middle.

@@ -1,6 +1,7 @@
 //! The incremental pressure scheme (`mps.pressure_scheme: incremental`): its gradient is exact
 //! for linear fields on any arrangement, and a tank at rest stays at rest under it, in 2D and
-//! 3D, where the standard scheme stirs itself (issue "A quiet core", README "Holding still").
+//! 3D, where the standard scheme stirs itself (issue "A quiet core", docs/validation.md
+//! "Holding still").
 mod core_setup;
 
 use core_setup::{advance, config, walled_box};
@@ -163,8 +164,8 @@ fn still_tank_configured<const D: usize>(
 fn still_tank_stays_still_in_2d() {
     // 0.6 m wide, 0.2 m deep at 20 mm: 1 % of sqrt(gH) is 14 mm/s.
     let (speed, bottom_error) = still_tank::<2>(PressureScheme::Incremental, [30, 14], 10, 2.0);
-    // The bound a Bingham layer needs to stay rigid (reference/quiet-mps.md: 1e-5 to 1e-3 m/s
-    // at 10 mm); measured 3e-5 m/s.
+    // The bound a Bingham layer needs to stay rigid (issue "A quiet core": 1e-5 to 1e-3 m/s at
+    // 10 mm); measured 3e-5 m/s.
     assert!(speed < 1e-3, "max speed {speed:.3e} m/s");
     assert!(
         bottom_error.abs() < 0.005,

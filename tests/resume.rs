@@ -4,7 +4,6 @@
 //! interrupted. A run file being written, finished or left by a killed run is never overwritten
 //! by another runner unless asked (`--overwrite`).
 mod common;
-use assert_cmd::cargo::CommandCargoExt;
 use mps_runner::record::{RunFile, read_run};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -13,16 +12,12 @@ use std::time::{Duration, Instant};
 /// Long enough (about 2000 steps) to be interrupted well before its end.
 const SETS: [&str; 4] = ["--set", "time.end_s=2", "--threads", "2"];
 
-fn runner() -> Command {
-    Command::cargo_bin("runner").unwrap()
-}
-
 fn start(out: &Path) -> Child {
     start_with("smoke_2d.yaml", &SETS, out)
 }
 
 fn start_with(experiment: &str, sets: &[&str], out: &Path) -> Child {
-    runner()
+    common::runner_process()
         .arg(common::experiment(experiment))
         .arg("--out")
         .arg(out)
@@ -59,7 +54,7 @@ fn signal(child: &Child, sig: &str) {
 }
 
 fn resume(path: &Path) -> PathBuf {
-    let out = runner()
+    let out = common::runner_process()
         .args(["resume", "-q", "--threads", "1"])
         .arg(path)
         .output()
@@ -74,7 +69,11 @@ fn resume(path: &Path) -> PathBuf {
 }
 
 fn verify_ok(path: &Path) {
-    let out = runner().args(["verify", "-q"]).arg(path).output().unwrap();
+    let out = common::runner_process()
+        .args(["verify", "-q"])
+        .arg(path)
+        .output()
+        .unwrap();
     assert_eq!(
         out.status.code(),
         Some(0),
@@ -178,7 +177,11 @@ fn resume_refuses_a_completed_run() {
     let dir = tempfile::tempdir().unwrap();
     let resolved = common::resolve("smoke_2d.yaml", &["time.end_s=0.02"]);
     let path = common::run_in(&resolved, dir.path(), 1).path;
-    let out = runner().arg("resume").arg(&path).output().unwrap();
+    let out = common::runner_process()
+        .arg("resume")
+        .arg(&path)
+        .output()
+        .unwrap();
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("already completed"));
 }
@@ -260,7 +263,7 @@ fn a_pour_killed_while_pouring_resumes_to_the_same_bits() {
 }
 
 fn run_smoke(out: &Path, extra: &[&str]) -> std::process::Output {
-    runner()
+    common::runner_process()
         .arg(common::experiment("smoke_2d.yaml"))
         .arg("--out")
         .arg(out)
@@ -321,7 +324,7 @@ fn a_run_being_written_is_left_alone_by_a_second_runner_and_by_resume() {
     let mut overwrite = sets.to_vec();
     overwrite.push("--overwrite");
     refused_with(&run_smoke(dir.path(), &overwrite), &busy);
-    let out = runner()
+    let out = common::runner_process()
         .args(["resume", "-q"])
         .arg(&partial)
         .output()

@@ -1,6 +1,5 @@
 //! Sweeps (`sweep:` manifests) and the SVG reports.
 mod common;
-use assert_cmd::Command;
 use mps_runner::experiment;
 use mps_runner::experiment::{Plan, Sweep, plan_from_str};
 use mps_runner::manifest::ManifestError;
@@ -185,10 +184,6 @@ fn sweep_errors_name_the_key_and_its_location() {
     assert_eq!(e.field(), Some("sweep.dimension.1"), "{e}");
 }
 
-fn runner() -> Command {
-    Command::cargo_bin("runner").unwrap()
-}
-
 fn write_sweep(dir: &Path, name: &str, section: &str) -> PathBuf {
     let path = dir.join(name);
     std::fs::write(&path, with_section(section)).unwrap();
@@ -223,7 +218,7 @@ fn sweep_runs_equal_single_runs_and_are_plotted() {
     let section = "sweep:\n  scene.column_width_m: [0.1, 0.15]\n  gravity_m_s2: [9.81, 5]\n";
     let path = write_sweep(dir.path(), "sweep.yaml", section);
     let out = dir.path().join("runs");
-    let assert = runner()
+    let assert = common::runner()
         .arg(&path)
         .arg("--out")
         .arg(&out)
@@ -264,7 +259,7 @@ fn sweep_runs_equal_single_runs_and_are_plotted() {
 
     // plot-sweep by hand, other grouping.
     let custom = dir.path().join("custom.svg");
-    runner()
+    common::runner()
         .args(["plot-sweep"])
         .arg(&folder)
         .args(["--x", "gravity_m_s2", "--y", "front_position_m", "--group"])
@@ -275,7 +270,7 @@ fn sweep_runs_equal_single_runs_and_are_plotted() {
         .success();
     assert_eq!(counts(&svg(&custom)), (2, 4));
     // Unknown key: bad input.
-    runner()
+    common::runner()
         .args(["plot-sweep"])
         .arg(&folder)
         .args(["--x", "fluid.nope", "--y", "front_position_m"])
@@ -293,7 +288,7 @@ fn run_sweep_library_and_failed_points() {
         "sweep:\n  stop.max_speed_m_s: [100, 0.01, 50]\n",
     );
     let out = dir.path().join("runs");
-    let assert = runner()
+    let assert = common::runner()
         .arg(&path)
         .arg("--out")
         .arg(&out)
@@ -338,12 +333,12 @@ fn run_sweep_library_and_failed_points() {
 
     // Bad sweep: exit 2, message names the key.
     let bad = write_sweep(dir.path(), "bad.yaml", "sweep:\n  fluid.nope: [1]\n");
-    let assert = runner().arg(&bad).assert().code(2);
+    let assert = common::runner().arg(&bad).assert().code(2);
     let stderr = String::from_utf8(assert.get_output().stderr.clone()).unwrap();
     assert!(stderr.contains("sweep.fluid.nope"), "{stderr}");
 
     // `runner hash` of a sweep prints the sweep hash.
-    let assert = runner().arg("hash").arg(&path).assert().success();
+    let assert = common::runner().arg("hash").arg(&path).assert().success();
     let hash = String::from_utf8(assert.get_output().stdout.clone()).unwrap();
     let s = sweep_of(
         &with_section("sweep:\n  stop.max_speed_m_s: [100, 0.01, 50]\n"),
@@ -363,7 +358,11 @@ fn plot_and_snapshot_of_one_run() {
     assert!(frame.fields.contains_key("kind") && frame.fields.contains_key("speed_m_s"));
 
     // Default metric: the first experiment metric; one series with one point per row.
-    let assert = runner().arg("plot").arg(&result.path).assert().success();
+    let assert = common::runner()
+        .arg("plot")
+        .arg(&result.path)
+        .assert()
+        .success();
     let out = PathBuf::from(
         String::from_utf8(assert.get_output().stdout.clone())
             .unwrap()
@@ -391,7 +390,7 @@ fn plot_and_snapshot_of_one_run() {
     assert_eq!(points, run.diagnostics.len());
 
     let ke = dir.path().join("ke.svg");
-    runner()
+    common::runner()
         .arg("plot")
         .arg(&result.path)
         .args(["--metric", "kinetic_energy_j", "--out"])
@@ -399,7 +398,7 @@ fn plot_and_snapshot_of_one_run() {
         .assert()
         .success();
     assert!(svg(&ke).contains("kinetic_energy_j [J]"));
-    runner()
+    common::runner()
         .arg("plot")
         .arg(&result.path)
         .args(["--metric", "nope"])
@@ -409,7 +408,7 @@ fn plot_and_snapshot_of_one_run() {
     // Snapshots: one circle per particle, categorical and ramp colouring.
     for field in ["kind", "speed_m_s"] {
         let out = dir.path().join(format!("snap-{field}.svg"));
-        runner()
+        common::runner()
             .arg("snapshot")
             .arg(&result.path)
             .args(["--field", field, "--out"])
@@ -420,7 +419,7 @@ fn plot_and_snapshot_of_one_run() {
         assert_eq!(counts(&text).1, frame.len(), "{field}");
         assert!(text.contains("x [m]") && text.contains("y [m]"));
     }
-    runner()
+    common::runner()
         .arg("snapshot")
         .arg(&result.path)
         .args(["--field", "nope"])
@@ -542,7 +541,7 @@ fn shards_together_are_the_whole_sweep_bit_for_bit() {
     let path = write_sweep(dir.path(), "sweep.yaml", section);
     let s = sweep_of(&with_section(section), &["time.end_s=0.04"]);
     let run = |out: &Path, extra: &[&str], env: &[(&str, &str)]| {
-        let mut cmd = runner();
+        let mut cmd = common::runner();
         cmd.arg(&path)
             .arg("--out")
             .arg(out)
@@ -628,7 +627,7 @@ fn shards_together_are_the_whole_sweep_bit_for_bit() {
         );
         assert!(!bad.exists());
     }
-    let single = runner()
+    let single = common::runner()
         .arg(common::experiment("smoke_2d.yaml"))
         .args(["--shard", "1/2", "--out"])
         .arg(dir.path().join("single"))
@@ -647,7 +646,7 @@ fn expanded_manifests_are_the_sweep_points() {
     let path = write_sweep(dir.path(), "sweep.yaml", section);
     let s = sweep_of(&with_section(section), &["time.end_s=0.04"]);
     let out = dir.path().join("manifests");
-    let assert = runner()
+    let assert = common::runner()
         .arg("expand")
         .arg(&path)
         .args(["--set", "time.end_s=0.04", "--out"])
@@ -667,7 +666,7 @@ fn expanded_manifests_are_the_sweep_points() {
     }
     // The second point run from its manifest equals the sweep's run of it.
     let single = dir.path().join("single");
-    let assert = runner()
+    let assert = common::runner()
         .arg(&files[1])
         .arg("--out")
         .arg(&single)
@@ -682,7 +681,7 @@ fn expanded_manifests_are_the_sweep_points() {
             .unwrap(),
     );
     let sweep_out = dir.path().join("runs");
-    runner()
+    common::runner()
         .arg(&path)
         .arg("--out")
         .arg(&sweep_out)
@@ -703,7 +702,7 @@ fn expanded_manifests_are_the_sweep_points() {
     assert!(!a.checkpoints.is_empty());
     assert!(a.checkpoints == b.checkpoints, "checkpoint hashes differ");
     // A manifest without a sweep is refused.
-    runner()
+    common::runner()
         .arg("expand")
         .arg(common::experiment("smoke_2d.yaml"))
         .assert()

@@ -64,7 +64,7 @@ fn the_quiet_scheme_holds_the_tank_and_its_summary_says_so() {
 
 #[test]
 fn the_standard_scheme_stirs_the_same_tank() {
-    // The noise the quiet scheme removes (README, "Holding still"): above 1 cm/s after
+    // The noise the quiet scheme removes (docs/validation.md, "Holding still"): above 1 cm/s after
     // settling, and the bottom reads high.
     let (result, _dir) = run("tank_at_rest.yaml", "standard");
     let metrics = &result.summary.metrics;

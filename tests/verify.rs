@@ -1,16 +1,11 @@
 //! `runner verify`: fresh runs verify, tampered files fail with a precise message, unusable
 //! files exit 2, segments replay.
 mod common;
-use assert_cmd::Command;
 use mps_runner::checkpoint::state_sha256;
 use mps_runner::record::{Outcome, Recorder, RunHeader, read_run};
 use mps_runner::restore::{Logged, read_messages};
 use mps_runner::verify::{VerifyOptions, verify};
 use std::path::{Path, PathBuf};
-
-fn runner() -> Command {
-    Command::cargo_bin("runner").unwrap()
-}
 
 /// A completed smoke run in `dir`.
 fn smoke_run(dir: &Path) -> PathBuf {
@@ -94,7 +89,11 @@ fn rewrite(src: &Path, dst: &Path, edit: Edit) {
 }
 
 fn verify_cli(path: &Path) -> (i32, String) {
-    let out = runner().args(["verify", "-q"]).arg(path).output().unwrap();
+    let out = common::runner()
+        .args(["verify", "-q"])
+        .arg(path)
+        .output()
+        .unwrap();
     let text = format!(
         "{}{}",
         String::from_utf8_lossy(&out.stdout),
@@ -195,7 +194,7 @@ fn segments_replay_from_a_logged_checkpoint() {
         assert_eq!(report.matched, n, "{report}");
         assert_eq!(report.summary_compared, to.is_none(), "{report}");
     }
-    let out = runner()
+    let out = common::runner()
         .args(["verify", "-q", "--from", "5"])
         .arg(&path)
         .output()
@@ -355,14 +354,14 @@ fn unusable_files_exit_2() {
         assert!(out.contains(needle), "{out}");
     }
     // Neither a file nor --trend: a usage error.
-    runner().arg("verify").assert().code(2);
+    common::runner().arg("verify").assert().code(2);
 }
 
 #[test]
 fn print_hashes_lists_every_checkpoint() {
     let dir = tempfile::tempdir().unwrap();
     let path = smoke_run(dir.path());
-    let out = runner()
+    let out = common::runner()
         .args(["verify", "-q", "--print-hashes", "--threads", "1"])
         .arg(&path)
         .output()
@@ -445,7 +444,7 @@ fn a_run_stopped_as_settled_verifies_from_the_start_and_from_a_checkpoint() {
     assert_eq!(result.summary.checkpoints.len(), 4);
     let (code, text) = verify_cli(&result.path);
     assert_eq!(code, 0, "{text}");
-    let out = runner()
+    let out = common::runner()
         .args(["verify", "-q", "--from", "2"])
         .arg(&result.path)
         .output()

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Opens a report page in a real headless browser and saves a screenshot to look at
-# (README "Reports"). Needs Chromium (Debian: `apt-get install chromium`).
+# (docs/cli.md "Reports"). Needs Chromium (Debian: `apt-get install chromium`).
 #   tools/check_report.sh [RUN.mcap|SWEEP_DIR]   (default: a fresh smoke_2d run)
 # Prints the page and the screenshot's path; fails when the browser cannot render the page.
 set -euo pipefail

@@ -15,7 +15,7 @@ run's front at --from-s, so a reader sees whether the run's slow approach to the
 is the Bingham fluid's own (same pace) or a numerical one.
 
 The fluid (density, yield stress, plastic viscosity), gravity and spacing come from the run's
-stored manifest. README *Validation* (Bingham heap) quotes its tables.
+stored manifest. docs/validation.md (Bingham heap) quotes its tables.
 
 Usage: .venv/bin/python tools/heap_lubrication.py RUN.mcap [--from-s 10] [--every-s 10]
 """

@@ -1,5 +1,5 @@
-"""Max fluid speed against time for the 2D tank at rest under both pressure schemes (README,
-"Holding still"). Input: the CSVs of `runner export --csv RUN` for each scheme.
+"""Max fluid speed against time for the 2D tank at rest under both pressure schemes
+(docs/validation.md, "Holding still"). Input: the CSVs of `runner export --csv RUN` for each scheme.
 
 Usage: python tools/plot_still_tank.py STANDARD.csv INCREMENTAL.csv OUT.png
 """

@@ -16,7 +16,7 @@ fi
 cargo test --release -- --include-ignored
 cargo build --release --bin runner
 
-# Determinism gate (README "Verify, resume, interrupts"): a small run on 1 and on 2 threads,
+# Determinism gate (docs/cli.md "Verify, resume, interrupts"): a small run on 1 and on 2 threads,
 # each replayed bit for bit by `runner verify`, and their checkpoint hashes compared.
 gate=$(mktemp -d)
 trap 'rm -rf "$gate"' EXIT

@@ -116,6 +116,12 @@ pub fn canonical_text<S: SceneSection>(manifest: &Manifest<S>) -> String {
     serde_json::to_string(&value).expect("a JSON value always serializes")
 }
 
+/// The first 12 hex digits of a hash, as file and folder names carry it (all of a shorter
+/// one, and never half a character of a damaged one read from a file).
+pub fn short_hash(hash_hex: &str) -> &str {
+    hash_hex.get(..12).unwrap_or(hash_hex)
+}
+
 /// Lowercase hex SHA-256 of the UTF-8 bytes of `text`.
 pub fn sha256_hex(text: &str) -> String {
     hex::encode(Sha256::digest(text.as_bytes()))

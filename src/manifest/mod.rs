@@ -54,7 +54,7 @@ pub struct Resolved<S> {
 impl<S> Resolved<S> {
     /// The first 12 hex digits of the hash (for file names).
     pub fn short_hash(&self) -> &str {
-        &self.hash_hex[..12]
+        canonical::short_hash(&self.hash_hex)
     }
 }
 

@@ -94,7 +94,7 @@ pub struct Sweep<S> {
 impl<S> Sweep<S> {
     /// First 12 hex digits of the sweep hash.
     pub fn short_hash(&self) -> &str {
-        &self.hash_hex[..12]
+        super::canonical::short_hash(&self.hash_hex)
     }
     /// Folder name of the sweep's runs: `<name>-sweep-<first 12 hex of the sweep hash>`.
     pub fn folder_name(&self) -> String {

@@ -498,8 +498,8 @@ pub struct Stop {
     /// has been lifted).
     #[serde(default = "default_non_flowing_after_s")]
     pub rest_after_s: f64,
-    /// Fluid that leaves the domain box becomes a ghost (README); a run with more ghosts than
-    /// this fails (0: the first particle to leave fails it). null = no limit.
+    /// Fluid that leaves the domain box becomes a ghost (docs/manifest.md, "Ghosts"); a run with
+    /// more ghosts than this fails (0: the first particle to leave fails it). null = no limit.
     #[serde(default)]
     pub max_ghost_particles: Option<u64>,
 }

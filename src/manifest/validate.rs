@@ -200,13 +200,13 @@ pub fn check<S: SceneSection>(m: &Manifest<S>) -> Vec<Issue> {
         p.surface_depth,
         between(0.0, true, 1.0, true),
     );
-    // Measured unstable in 3D (README "Holding still"): a 3D tank at rest that holds still
-    // without it grows to 0.1 m/s within 1.5 s with it.
+    // Measured unstable in 3D (docs/validation.md "Holding still"): a 3D tank at rest that holds
+    // still without it grows to 0.1 m/s within 1.5 s with it.
     if m.dimension == 3 && p.pressure_regularisation > 0.0 {
         c.fail(
             "mps.pressure_regularisation",
             format!(
-                "is 2D only (it destabilises a 3D tank at rest, README \"Holding still\"); got {} with dimension 3",
+                "is 2D only (it destabilises a 3D tank at rest, docs/validation.md \"Holding still\"); got {} with dimension 3",
                 fmt_num(p.pressure_regularisation)
             ),
         );

@@ -6,7 +6,7 @@
 //! replay needs. While moving, the body's particles carry the path velocity, so the implicit
 //! viscous stage sees a moving no-slip wall.
 //!
-//! Only `+ - * /`, comparisons and the exact f64 remainder are used (DESIGN.md section 6).
+//! Only `+ - * /`, comparisons and the exact f64 remainder are used (docs/design.md section 6).
 use super::particles::Vector;
 
 /// One piece of a [`Path`]: from `start_s` on the offset moves from `start_offset_m` at

@@ -3,7 +3,7 @@
 //! An inlet pours a fixed number of particles, layer by layer, onto a fixed lattice of the
 //! cross-section. Its only state is how many particles it has poured so far (kept by the
 //! solver and recorded in the checkpoint); everything else follows from the configuration.
-//! Only `+ - * /`, `sqrt` and comparisons are used (DESIGN.md section 6).
+//! Only `+ - * /`, `sqrt` and comparisons are used (docs/design.md section 6).
 use super::particles::{Vector, cell_volume};
 
 /// An opening through which fluid enters at a constant speed.

@@ -10,6 +10,7 @@ pub mod pressure;
 pub mod reduce;
 pub mod rheology;
 pub mod solver;
+pub mod sparse;
 pub mod viscosity;
 
 pub use body::{Path, RigidBody, Segment};

@@ -10,10 +10,10 @@
 //! factorisation. The cycle is a fixed symmetric positive definite linear operator, so CG
 //! stays plain CG.
 //!
-//! Determinism (DESIGN.md 6): aggregates follow from the cells alone; every coarse entry and
-//! every restricted value is summed over the members of an aggregate in ascending index
+//! Determinism (docs/design.md section 6): aggregates follow from the cells alone; every coarse
+//! entry and every restricted value is summed over the members of an aggregate in ascending index
 //! order; products are gathered row by row. Nothing depends on the thread count.
-use super::pressure::CsrMatrix;
+use super::sparse::CsrMatrix;
 use rayon::prelude::*;
 
 /// Jacobi damping of the smoother: the MPS matrices (and their Galerkin products) are

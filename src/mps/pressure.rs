@@ -1,107 +1,9 @@
-//! Sparse symmetric systems of the step (PPE and implicit viscosity): assembly in CSR and a
-//! Jacobi-preconditioned conjugate gradient.
+//! The step's sparse linear systems (PPE and implicit viscosity): Jacobi- or multigrid-
+//! preconditioned conjugate gradient, and BiCGStab for the exact projection.
 use super::multigrid::Multigrid;
-use super::reduce::{CHUNK, MIN_PARALLEL_LEN, PARTICLES_PER_TASK, sum_by};
+use super::reduce::{CHUNK, MIN_PARALLEL_LEN, sum_by};
+use super::sparse::CsrMatrix;
 use rayon::prelude::*;
-
-/// Symmetric sparse matrix in compressed rows (diagonal stored separately).
-#[derive(Debug, Clone, Default)]
-pub struct CsrMatrix {
-    pub diagonal: Vec<f64>,
-    pub row_offsets: Vec<usize>,
-    pub columns: Vec<u32>,
-    pub values: Vec<f64>,
-}
-
-impl CsrMatrix {
-    /// Assembles `n` rows in parallel, in fixed chunks of rows (so no allocation per row):
-    /// `row(k, columns, values)` appends the off-diagonal entries of row k and returns its
-    /// diagonal and one more value of the caller's per row.
-    pub fn assemble<T: Send>(
-        n: usize,
-        row: impl Fn(usize, &mut Vec<u32>, &mut Vec<f64>) -> (f64, T) + Sync,
-    ) -> (Self, Vec<T>) {
-        type Chunk<T> = (Vec<f64>, Vec<usize>, Vec<u32>, Vec<f64>, Vec<T>);
-        let chunks: Vec<Chunk<T>> = (0..n.div_ceil(PARTICLES_PER_TASK))
-            .into_par_iter()
-            .with_max_len(1)
-            .map(|c| {
-                let range = c * PARTICLES_PER_TASK..((c + 1) * PARTICLES_PER_TASK).min(n);
-                let mut diagonal = Vec::with_capacity(range.len());
-                let mut ends = Vec::with_capacity(range.len());
-                let mut extra = Vec::with_capacity(range.len());
-                let (mut columns, mut values) = (Vec::new(), Vec::new());
-                for k in range {
-                    let (d, t) = row(k, &mut columns, &mut values);
-                    diagonal.push(d);
-                    ends.push(columns.len());
-                    extra.push(t);
-                }
-                (diagonal, ends, columns, values, extra)
-            })
-            .collect();
-        let mut m = CsrMatrix {
-            diagonal: Vec::with_capacity(n),
-            row_offsets: Vec::with_capacity(n + 1),
-            columns: Vec::with_capacity(chunks.iter().map(|c| c.2.len()).sum()),
-            values: Vec::with_capacity(chunks.iter().map(|c| c.3.len()).sum()),
-        };
-        m.row_offsets.push(0);
-        let mut extras = Vec::with_capacity(n);
-        for (diagonal, ends, columns, values, extra) in chunks {
-            let base = m.columns.len();
-            m.diagonal.extend_from_slice(&diagonal);
-            m.row_offsets.extend(ends.iter().map(|e| base + e));
-            m.columns.extend_from_slice(&columns);
-            m.values.extend_from_slice(&values);
-            extras.extend(extra);
-        }
-        (m, extras)
-    }
-
-    pub fn rows(&self) -> usize {
-        self.diagonal.len()
-    }
-
-    /// y = A x for M vectors at once (one pass over the matrix), each row gathered by its own
-    /// task in a fixed order: every component gets the bits of a single product.
-    pub fn multiply<const M: usize>(&self, x: &[[f64; M]], y: &mut [[f64; M]]) {
-        assert_eq!(x.len(), self.rows());
-        y.par_iter_mut()
-            .with_min_len(MIN_PARALLEL_LEN)
-            .enumerate()
-            .for_each(|(i, yi)| *yi = self.row_product(i, x));
-    }
-
-    /// Row i of A x.
-    #[inline]
-    pub fn row_value(&self, i: usize, x: &[f64]) -> f64 {
-        let range = self.row_offsets[i]..self.row_offsets[i + 1];
-        let mut s = self.diagonal[i] * x[i];
-        for (&c, &v) in self.columns[range.clone()].iter().zip(&self.values[range]) {
-            s += v * x[c as usize];
-        }
-        s
-    }
-
-    /// Row i of A x, for M vectors.
-    #[inline]
-    fn row_product<const M: usize>(&self, i: usize, x: &[[f64; M]]) -> [f64; M] {
-        let range = self.row_offsets[i]..self.row_offsets[i + 1];
-        let mut s = [0.0; M];
-        for m in 0..M {
-            s[m] = self.diagonal[i] * x[i][m];
-        }
-        // Zipped slices: no bounds check per entry but the column lookup.
-        for (&c, &v) in self.columns[range.clone()].iter().zip(&self.values[range]) {
-            let xc = &x[c as usize];
-            for m in 0..M {
-                s[m] += v * xc[m];
-            }
-        }
-        s
-    }
-}
 
 /// The preconditioner of a CG solve.
 #[derive(Clone, Copy)]
@@ -123,7 +25,7 @@ pub struct SolveReport {
 
 /// Solves A x = b for symmetric positive definite A with the given preconditioner, starting
 /// from the guess in `x`. Stops when ||r|| <= tolerance ||b||. All reductions are order-fixed
-/// (DESIGN.md 6).
+/// (docs/design.md section 6).
 pub fn solve_pcg(
     a: &CsrMatrix,
     b: &[f64],
@@ -149,7 +51,7 @@ pub fn solve_pcg(
 /// Each iteration makes three parallel passes over fixed chunks of [`CHUNK`] rows: the
 /// product A p with p . Ap, the updates of x, r and z with r . z and r . r, and the new p.
 /// The dot products are summed within each chunk in row order and then over the chunks in
-/// order, exactly as [`sum_by`] does (DESIGN.md 6).
+/// order, exactly as [`sum_by`] does (docs/design.md section 6).
 pub fn solve_pcg_many<const M: usize>(
     a: &CsrMatrix,
     b: &[[f64; M]],
@@ -341,7 +243,7 @@ fn in_order<const M: usize>(partials: &[[f64; M]]) -> [f64; M] {
 
 /// Solves A x = b for a general (non-symmetric) A by Jacobi-preconditioned BiCGStab (van der
 /// Vorst 1992), from the guess in `x`. Stops when ||r|| <= tolerance ||b||. Reductions are
-/// order-fixed as in [`solve_pcg`] (DESIGN.md 6).
+/// order-fixed as in [`solve_pcg`] (docs/design.md section 6).
 pub fn solve_bicgstab(
     a: &CsrMatrix,
     b: &[f64],

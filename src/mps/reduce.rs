@@ -1,4 +1,4 @@
-//! Order-fixed parallel reductions (DESIGN.md section 6).
+//! Order-fixed parallel reductions (docs/design.md section 6).
 //!
 //! rayon's `sum`/`reduce` combine partial results in an order that depends on work stealing,
 //! so floating-point sums change with the thread count. Here the split into chunks depends on

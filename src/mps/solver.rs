@@ -1,12 +1,19 @@
-//! One time step of the MPS method (DESIGN.md section 3), stage by stage.
+//! One time step of the MPS method (docs/design.md section 3), stage by stage. The stages, in
+//! the order [`Solver::step`] runs them (docs/design.md section 3.1 numbers them the same way,
+//! and so do the labels in the code):
+//! (1) inlets pour and (2) rigid bodies take their path velocity; (3) neighbour lists and
+//! kernel pairs (`neighbours.rs`); (4) the carried pressure's force (incremental scheme,
+//! `incremental.rs`); (5) implicit viscosity and gravity give u* (`mps/viscosity.rs`);
+//! (6) r* = r + dt u*; (7) neighbours again and collisions (`contact.rs`); (8) the projection:
+//! pressure and the correction of velocity and position (`standard.rs`, or `incremental.rs`
+//! and `exact.rs`); (9) pair stabilisation and (10) a second fluid-wall collision pass
+//! (`contact.rs`); (11) the clock advances and the state is checked (`state.rs`).
 use super::body::RigidBody;
 use super::grid::{KernelPairs, Neighbours};
 use super::inlet::Inlet;
-use super::kernel::{RefValues, weight};
-use super::multigrid::Multigrid;
-use super::operators::{gradient, number_density};
+use super::kernel::RefValues;
 use super::particles::{ParticleKind, Particles, Vector};
-use super::pressure::{CsrMatrix, Preconditioner, SolveReport, solve_pcg};
+use super::pressure::SolveReport;
 use super::reduce::PARTICLES_PER_TASK;
 use super::reduce::max_by;
 use super::rheology::Rheology;
@@ -14,8 +21,12 @@ use super::viscosity::{StrainRateGradient, ViscousSettings, predict_velocity};
 use rayon::prelude::*;
 use std::time::Instant;
 
+mod contact;
 mod exact;
 mod incremental;
+mod neighbours;
+mod standard;
+mod state;
 
 /// Physical and numerical parameters of the solver, all in SI units.
 #[derive(Debug, Clone, PartialEq)]
@@ -378,19 +389,20 @@ impl<const D: usize> Solver<D> {
     }
 
     fn step_stages(&mut self, dt_s: f64) -> Result<StepReport, StepError> {
-        // (1) Viscosity (implicit, with the effective viscosity of the rheology) and gravity
-        // give the predicted velocity u*, then (2) r* = r + dt u*.
+        // (1) Inlets pour; (2) rigid bodies carry their path velocity during the step (a
+        // moving no-slip wall for the viscous stage).
         self.pour();
-        // Rigid bodies carry their path velocity during the step (a moving no-slip wall for
-        // the viscous stage).
         for body in &self.config.bodies {
             let velocity = body.path.velocity_m_s(self.time_s);
             for v in &mut self.particles.velocity_m_s[body.first..body.end] {
                 *v = velocity;
             }
         }
+        // (3) Neighbours at the current positions.
         self.rebuild_neighbours();
         self.refresh_pairs();
+        // (4) The carried pressure's force and (5) viscosity (implicit, with the effective
+        // viscosity of the rheology) and gravity give the predicted velocity u*.
         let start_density = match self.config.source_term {
             SourceTerm::Mixed => Some(self.number_density()),
             SourceTerm::NumberDensity => None,
@@ -424,6 +436,7 @@ impl<const D: usize> Solver<D> {
         }
         let non_flowing_fraction = self.non_flowing_fraction(&stage.strain_invariant);
         self.strain_invariant = stage.strain_invariant;
+        // (6) r* = r + dt u*.
         {
             let p = &mut self.particles;
             let kind = &p.kind;
@@ -444,17 +457,18 @@ impl<const D: usize> Solver<D> {
             }
         }
 
-        // Neighbours at the predicted positions, used by every later stage of the step.
+        // (7) Neighbours at the predicted positions, used by every later stage of the step.
         self.rebuild_neighbours();
         self.collide(dt_s, false);
         self.refresh_pairs();
 
-        // (3) Pressure, (4) correction of velocity and position.
+        // (8) Pressure, and the correction of velocity and position.
         let (ppe, surface_count) = if incremental {
             self.incremental_projection(dt_s)?
         } else {
             self.standard_projection(dt_s, start_density.as_deref())?
         };
+        // (9) Pair stabilisation, (10) fluid-wall collisions once more.
         if incremental && self.config.pair_stabilisation_m > 0.0 {
             self.stabilise_pairs(dt_s, self.config.pair_stabilisation_m);
         }
@@ -464,6 +478,7 @@ impl<const D: usize> Solver<D> {
             self.collide(dt_s, true);
         }
 
+        // (11) The clock, and the state's check.
         self.time_s += dt_s;
         self.step += 1;
         self.check_state()?;
@@ -474,58 +489,6 @@ impl<const D: usize> Solver<D> {
             non_flowing_fraction,
             surface_count,
         })
-    }
-
-    /// (3)-(4) of the standard scheme: n*, free surface, PPE for the whole pressure, and the
-    /// correction with the p_j - p_min gradient. Returns the PPE report and the surface count.
-    fn standard_projection(
-        &mut self,
-        dt_s: f64,
-        start_density: Option<&[f64]>,
-    ) -> Result<(SolveReport, usize), StepError> {
-        // Number density n*, free surface, pressure Poisson equation.
-        let pressure_started = Instant::now();
-        let number_density = self.number_density();
-        let threshold = self.config.surface_threshold * self.refs.n0;
-        let surface: Vec<bool> = number_density
-            .par_iter()
-            .with_min_len(PARTICLES_PER_TASK)
-            .map(|&n| n < threshold)
-            .collect();
-        let source = self.pressure_source(dt_s, start_density.unwrap_or(&number_density));
-        let kind = &self.particles.kind;
-        let surface_count = (0..kind.len())
-            .into_par_iter()
-            .with_min_len(PARTICLES_PER_TASK)
-            .filter(|&i| kind[i] == ParticleKind::Fluid && surface[i])
-            .count();
-        let (ppe, solve_s) = self.solve_pressure(dt_s, &source, &surface);
-        self.timing.pressure_solve_s += solve_s;
-        self.timing.ppe_iterations += u64::from(ppe.iterations);
-        self.timing.pressure_assembly_s += pressure_started.elapsed().as_secs_f64() - solve_s;
-        self.check_pressure_solve(&ppe)?;
-
-        // (4) Correct velocity and position with the pressure gradient.
-        self.correct_with_pressure_gradient(dt_s);
-        Ok((ppe, surface_count))
-    }
-
-    /// A PPE solve that met a non-finite value or did not converge fails the step.
-    fn check_pressure_solve(&self, ppe: &SolveReport) -> Result<(), StepError> {
-        if ppe.relative_residual.is_nan() {
-            return Err(StepError::NonFiniteSolve {
-                solve: "pressure",
-                step: self.step,
-            });
-        }
-        if !ppe.converged {
-            return Err(StepError::PressureNotConverged {
-                residual: ppe.relative_residual,
-                iterations: ppe.iterations,
-                step: self.step,
-            });
-        }
-        Ok(())
     }
 
     /// Whether particle i flowed at the start of the last step (false before any step).
@@ -556,531 +519,6 @@ impl<const D: usize> Solver<D> {
         } else {
             resting as f64 / fluid as f64
         }
-    }
-
-    /// Neighbour lists of the active particles at the current positions.
-    /// Makes sure the lists hold every active pair closer than the Laplacian radius: rebuilt
-    /// when some particle has moved more than half the skin since the last build.
-    fn rebuild_neighbours(&mut self) {
-        let started = Instant::now();
-        self.wrap_periodic();
-        self.refresh_lists();
-        self.timing.neighbours_s += started.elapsed().as_secs_f64();
-    }
-
-    /// The kernel-radius pairs at the current positions (after every move of the particles
-    /// that later stages see). A wall particle with no fluid particle within the Laplacian
-    /// radius gets none: its number density is then 0, so it is a free-surface particle with
-    /// p = 0 and no PPE row. Only a wall that is near fluid carries pressure (away from the
-    /// fluid a wall's pressure has no meaning; in wall corners it would be a spurious
-    /// pressure from the walls' own number density).
-    fn refresh_pairs(&mut self) {
-        let started = Instant::now();
-        let r = &self.refs;
-        let kind = &self.particles.kind;
-        self.pairs = KernelPairs::near_fluid(
-            &self.neighbours,
-            &self.particles.position_m,
-            r.radius_n_m,
-            r.radius_lap_m,
-            |i| kind[i] == ParticleKind::Fluid,
-        );
-        self.paired_at_m.clone_from(&self.particles.position_m);
-        self.timing.kernel_pairs_s += started.elapsed().as_secs_f64();
-    }
-
-    /// Brings every particle that crossed the periodic seam back into the period (the lists
-    /// then see it as moved by a period and are rebuilt).
-    fn wrap_periodic(&mut self) {
-        let Some(periodic) = self.config.periodic_x else {
-            return;
-        };
-        for x in &mut self.particles.position_m {
-            let offset = x[0] - periodic.min_m;
-            if !(0.0..periodic.period_m).contains(&offset) {
-                x[0] = periodic.min_m + offset.rem_euclid(periodic.period_m);
-                // rem_euclid may round up to the period itself.
-                if x[0] >= periodic.min_m + periodic.period_m {
-                    x[0] = periodic.min_m;
-                }
-            }
-        }
-    }
-
-    fn refresh_lists(&mut self) {
-        let skin = LIST_SKIN * self.config.spacing_m;
-        let p = &self.particles;
-        let valid = self.listed_at_m.len() == p.len()
-            && max_by(p.len(), |i| {
-                if p.kind[i].is_active() {
-                    (p.position_m[i] - self.listed_at_m[i]).norm()
-                } else {
-                    0.0
-                }
-            }) < 0.5 * skin;
-        if valid && !self.fresh_lists {
-            return;
-        }
-        let kind = &p.kind;
-        // Operators are evaluated at fluid particles and at wall particles with fluid within
-        // reach (see `refresh_pairs`): only they get lists. Dummy layers and walls away from
-        // the fluid only fill the support of others.
-        let cutoff_m = self.config.radius_lap_m + skin;
-        let active = |i: usize| kind[i].is_active();
-        self.neighbours = Neighbours::build_centres_then_listed(
-            &p.position_m,
-            cutoff_m,
-            self.config.periodic_x.map(|x| x.period_m),
-            active,
-            |i| kind[i] == ParticleKind::Fluid,
-            |i| kind[i] == ParticleKind::Wall,
-        );
-        self.listed_at_m = p.position_m.clone();
-        self.timing.list_builds += 1;
-    }
-
-    /// Lists holding every pair closer than the collision distances: the number-density pairs
-    /// of the last cut when no particle has moved far enough since to close a pair from
-    /// beyond their radius (a pair closer than d now was closer than d + 2 max|moved| then),
-    /// else the Verlet lists. Both are in ascending index order, and collisions skip pairs
-    /// beyond d, so either gives the same bits; the pairs are about a fifth as many in 3D.
-    fn collision_candidates(&self) -> &Neighbours {
-        let c = &self.config;
-        let p = &self.particles;
-        let reach = c.collision_distance_m.max(c.wall_collision_distance_m);
-        if self.paired_at_m.len() != p.len() || self.fresh_lists {
-            return &self.neighbours;
-        }
-        let moved = max_by(p.len(), |i| {
-            if p.kind[i].is_active() {
-                (p.position_m[i] - self.paired_at_m[i]).norm()
-            } else {
-                0.0
-            }
-        });
-        // A relative margin for the rounding of the distances.
-        if reach + 2.0 * moved < self.refs.radius_n_m * (1.0 - 1e-9) {
-            &self.pairs.near
-        } else {
-            &self.neighbours
-        }
-    }
-
-    /// Dynamic stabilisation (Tsuruta, Khayyer & Gotoh 2013, simplified): each fluid particle
-    /// closer than `distance_m` to another gets the velocity that moves it back by its share
-    /// of the shortfall within this step, along the pair's axis: half against fluid (equal and
-    /// opposite, so momentum is kept), all against a wall or dummy. Idle when every pair is at
-    /// least `distance_m` apart (a lattice at rest).
-    fn stabilise_pairs(&mut self, dt_s: f64, distance_m: f64) {
-        let nb = &self.pairs.near;
-        let dv = self.pair_velocity_changes(nb, |_, j, r| {
-            let d = r.norm();
-            if d >= distance_m || d == 0.0 {
-                return None;
-            }
-            let share = if self.particles.kind[j] == ParticleKind::Fluid {
-                0.5
-            } else {
-                1.0
-            };
-            Some(r * (share * (distance_m - d) / (d * dt_s)))
-        });
-        self.apply_velocity_changes(&dv, dt_s);
-    }
-
-    /// For every fluid particle i, minus the sum over its neighbours j in `nb` (in list order)
-    /// of `pair(i, j, r_ij)` where it is Some; zero elsewhere.
-    fn pair_velocity_changes(
-        &self,
-        nb: &Neighbours,
-        pair: impl Fn(usize, usize, Vector<D>) -> Option<Vector<D>> + Sync,
-    ) -> Vec<Vector<D>> {
-        let p = &self.particles;
-        (0..p.len())
-            .into_par_iter()
-            .with_min_len(PARTICLES_PER_TASK)
-            .with_max_len(PARTICLES_PER_TASK)
-            .map(|i| {
-                let mut dv = Vector::<D>::zeros();
-                if p.kind[i] != ParticleKind::Fluid {
-                    return dv;
-                }
-                for &j in nb.of(i) {
-                    let j = j as usize;
-                    if let Some(v) = pair(i, j, nb.displacement(&p.position_m, i, j)) {
-                        dv -= v;
-                    }
-                }
-                dv
-            })
-            .collect()
-    }
-
-    /// u += dv, r += dt dv at every particle.
-    fn apply_velocity_changes(&mut self, dv: &[Vector<D>], dt_s: f64) {
-        let p = &mut self.particles;
-        per_particle(&mut p.velocity_m_s, &mut p.position_m, |i, v, x| {
-            *v += dv[i];
-            *x += dv[i] * dt_s;
-        });
-    }
-
-    /// (5) Collision model: fluid pairs closer than the collision distance that approach each
-    /// other exchange momentum along their line of centres with restitution e (equal masses;
-    /// walls are immovable). Jacobi-style: all impulses from the pre-collision velocities.
-    /// `walls_only`: fluid-wall pairs only.
-    fn collide(&mut self, dt_s: f64, walls_only: bool) {
-        let c = &self.config;
-        if c.collision_distance_m <= 0.0 {
-            return;
-        }
-        let p = &self.particles;
-        let nb = self.collision_candidates();
-        let d2 = c.collision_distance_m * c.collision_distance_m;
-        let d2_wall = c.wall_collision_distance_m * c.wall_collision_distance_m;
-        let e = c.collision_restitution;
-        let dv = self.pair_velocity_changes(nb, |i, j, r| {
-            if p.kind[j] == ParticleKind::Dummy {
-                return None;
-            }
-            let r2 = r.norm_squared();
-            let fluid_pair = p.kind[j] == ParticleKind::Fluid;
-            if fluid_pair && walls_only {
-                return None;
-            }
-            if r2 >= (if fluid_pair { d2 } else { d2_wall }) || r2 == 0.0 {
-                return None;
-            }
-            let n = r / r2.sqrt();
-            let approach = (p.velocity_m_s[i] - p.velocity_m_s[j]).dot(&n);
-            // Only approaching pairs collide; the fluid particle of a fluid-wall pair takes it all.
-            (approach > 0.0).then(|| {
-                let share = if fluid_pair { 0.5 } else { 1.0 };
-                n * ((1.0 + e) * share * approach)
-            })
-        });
-        self.apply_velocity_changes(&dv, dt_s);
-    }
-
-    /// n_i with radius re_n at the current positions, over all active particles (dummies
-    /// included: they fill the wall's support).
-    fn number_density(&self) -> Vec<f64> {
-        let p = &self.particles;
-        let nb = &self.pairs.near;
-        let re = self.refs.radius_n_m;
-        (0..p.len())
-            .into_par_iter()
-            .with_min_len(PARTICLES_PER_TASK)
-            .with_max_len(PARTICLES_PER_TASK)
-            .map(|i| number_density(&p.position_m, nb, i, re, |_| true))
-            .collect()
-    }
-
-    /// Right-hand side of the PPE per particle (see [`SourceTerm`]); `density` is n* for the
-    /// number-density source and n^k for the mixed one.
-    fn pressure_source(&self, dt_s: f64, density: &[f64]) -> Vec<f64> {
-        let c = &self.config;
-        let p = &self.particles;
-        let nb = &self.pairs.near;
-        let refs = self.refs;
-        let rho = c.density_kg_m3;
-        let density_scale = c.relaxation_coefficient * rho / (dt_s * dt_s);
-        let mixed = c.source_term == SourceTerm::Mixed;
-        (0..p.len())
-            .into_par_iter()
-            .with_min_len(PARTICLES_PER_TASK)
-            .with_max_len(PARTICLES_PER_TASK)
-            .map(|i| {
-                let mut b = density_scale * (density[i] - refs.n0) / refs.n0;
-                if mixed && p.kind[i].has_pressure() {
-                    // Divergence model: d/n0 sum_j (u_j - u_i) . r_ij w / |r_ij|^2.
-                    let mut div = 0.0;
-                    for &j in nb.of(i) {
-                        let j = j as usize;
-                        let r = nb.displacement(&p.position_m, i, j);
-                        let r2 = r.norm_squared();
-                        let w = weight(r2.sqrt(), refs.radius_n_m);
-                        if w > 0.0 {
-                            div += (p.velocity_m_s[j] - p.velocity_m_s[i]).dot(&r) * w / r2;
-                        }
-                    }
-                    b -= rho / dt_s * div * (D as f64 / refs.n0);
-                }
-                b
-            })
-            .collect()
-    }
-
-    /// PPE (Koshizuka & Oka): -<lap p>_i + rho kappa p_i / dt^2 = source_i for fluid and wall
-    /// particles not on the surface; p = 0 on the surface (Dirichlet).
-    /// Assembled once in CSR and solved by Jacobi-PCG; negative pressure is clipped to 0.
-    /// Returns the solver's report and the seconds spent in the CG solve.
-    fn solve_pressure(
-        &mut self,
-        dt_s: f64,
-        source: &[f64],
-        surface: &[bool],
-    ) -> (SolveReport, f64) {
-        let p = &self.particles;
-        let unknown_of: Vec<u32> = {
-            let mut next = 0u32;
-            (0..p.len())
-                .map(|i| {
-                    if p.kind[i].has_pressure() && !surface[i] {
-                        next += 1;
-                        next - 1
-                    } else {
-                        u32::MAX
-                    }
-                })
-                .collect()
-        };
-        let rows: Vec<usize> = (0..p.len())
-            .filter(|&i| unknown_of[i] != u32::MAX)
-            .collect();
-        let (matrix, _) = self.assemble_ppe(
-            dt_s,
-            &rows,
-            &unknown_of,
-            |j| p.kind[j].has_pressure(),
-            |_| 0.0,
-        );
-        let rhs: Vec<f64> = rows.iter().map(|&i| source[i]).collect();
-        // Warm start from the previous pressure (part of the recorded state, so replays and
-        // resumed runs start the solver from the same guess).
-        let mut solution: Vec<f64> = rows.iter().map(|&i| p.pressure_pa[i]).collect();
-        let solve_started = Instant::now();
-        let report = self.solve_ppe_system(&matrix, &rhs, &mut solution, &rows);
-        let solve_s = solve_started.elapsed().as_secs_f64();
-        let pressure = &mut self.particles.pressure_pa;
-        pressure.iter_mut().for_each(|v| *v = 0.0);
-        for (k, &i) in rows.iter().enumerate() {
-            pressure[i] = solution[k].max(0.0);
-        }
-        (report, solve_s)
-    }
-
-    /// The PPE matrix -<lap>_i + rho kappa / dt^2 (eq. 4, Laplacian radius) on the particles
-    /// `rows` (unknown k at particle rows[k], `unknown_of` its inverse, u32::MAX for none),
-    /// over the neighbours j with `include(j)`. A neighbour that is no unknown has the known
-    /// value `known(j)`; returns per row the sum of a_ij known(j), which belongs on the right
-    /// side.
-    fn assemble_ppe(
-        &self,
-        dt_s: f64,
-        rows: &[usize],
-        unknown_of: &[u32],
-        include: impl Fn(usize) -> bool + Sync,
-        known: impl Fn(usize) -> f64 + Sync,
-    ) -> (CsrMatrix, Vec<f64>) {
-        let p = &self.particles;
-        let nb = &self.pairs.lap;
-        let refs = self.refs;
-        let coef = 2.0 * D as f64 / (refs.lambda_m2 * refs.n0_lap);
-        let diag_extra =
-            self.config.density_kg_m3 * self.config.compressibility_1_pa / (dt_s * dt_s);
-        CsrMatrix::assemble(rows.len(), |k, columns, values| {
-            let i = rows[k];
-            let mut diag = diag_extra;
-            let mut known_sum = 0.0;
-            for &j in nb.of(i) {
-                let j = j as usize;
-                if !include(j) {
-                    continue;
-                }
-                let a = coef
-                    * weight(
-                        nb.displacement(&p.position_m, i, j).norm(),
-                        refs.radius_lap_m,
-                    );
-                if a == 0.0 {
-                    continue;
-                }
-                diag += a;
-                if unknown_of[j] != u32::MAX {
-                    columns.push(unknown_of[j]);
-                    values.push(-a);
-                } else {
-                    known_sum += a * known(j);
-                }
-            }
-            (diag, known_sum)
-        })
-    }
-
-    /// Solves the PPE `matrix` (rows at particles `rows`) by PCG from the guess in `solution`,
-    /// preconditioned by Jacobi or by aggregation multigrid, whose aggregates follow each
-    /// unknown's lattice cell (spacings from the origin).
-    fn solve_ppe_system(
-        &self,
-        matrix: &CsrMatrix,
-        rhs: &[f64],
-        solution: &mut [f64],
-        rows: &[usize],
-    ) -> SolveReport {
-        let c = &self.config;
-        let p = &self.particles;
-        let multigrid = c.multigrid_ppe.then(|| {
-            let l0 = c.spacing_m;
-            let cells: Vec<[i64; 3]> = rows
-                .iter()
-                .map(|&i| {
-                    let x = p.position_m[i];
-                    std::array::from_fn(|a| if a < D { (x[a] / l0).floor() as i64 } else { 0 })
-                })
-                .collect();
-            Multigrid::new(matrix, &cells)
-        });
-        solve_pcg(
-            matrix,
-            rhs,
-            solution,
-            c.ppe_tolerance,
-            c.ppe_max_iterations,
-            multigrid
-                .as_ref()
-                .map_or(Preconditioner::Jacobi, Preconditioner::Multigrid),
-        )
-    }
-
-    /// u += -dt/rho <grad p>, r += dt * (change of u), with the gradient model (eq. 3) using
-    /// p_j - min_k p_k over i and its neighbours (keeps the pair force repulsive).
-    fn correct_with_pressure_gradient(&mut self, dt_s: f64) {
-        let p = &self.particles;
-        let nb = &self.pairs.near;
-        let refs = self.refs;
-        let scale = -dt_s / self.config.density_kg_m3;
-        let dv: Vec<Vector<D>> = (0..p.len())
-            .into_par_iter()
-            .with_min_len(PARTICLES_PER_TASK)
-            .with_max_len(PARTICLES_PER_TASK)
-            .map(|i| {
-                if p.kind[i] != ParticleKind::Fluid {
-                    return Vector::<D>::zeros();
-                }
-                let mut p_min = p.pressure_pa[i];
-                for &j in nb.of(i) {
-                    let j = j as usize;
-                    if p.kind[j].has_pressure()
-                        && weight(nb.displacement(&p.position_m, i, j).norm(), refs.radius_n_m)
-                            > 0.0
-                    {
-                        p_min = p_min.min(p.pressure_pa[j]);
-                    }
-                }
-                gradient(&p.position_m, nb, i, refs.radius_n_m, refs.n0, |j| {
-                    p.kind[j].has_pressure().then(|| p.pressure_pa[j] - p_min)
-                }) * scale
-            })
-            .collect();
-        let p = &mut self.particles;
-        per_particle(&mut p.velocity_m_s, &mut p.position_m, |i, v, x| {
-            *v += dv[i];
-            *x += dv[i] * dt_s;
-        });
-    }
-
-    /// Inlets, in order: the next layer of each unfinished inlet whose due time has come is
-    /// appended at the end of the particle arrays, unless a fluid particle lies within the
-    /// inlet's clearance of one of its positions (then the inlet waits). At most one layer per inlet per
-    /// step: a second due layer would sit on the first one, which blocks it.
-    fn pour(&mut self) {
-        let l0 = self.config.spacing_m;
-        for k in 0..self.config.inlets.len() {
-            let inlet = &self.config.inlets[k];
-            let section = &self.inlet_sections[k];
-            let total = inlet.total_count(l0);
-            let emitted = self.inlet_emitted[k];
-            if emitted >= total || section.is_empty() {
-                continue;
-            }
-            let layer = emitted / section.len() as u64;
-            if self.time_s < inlet.layer_due_s(layer, l0) {
-                continue;
-            }
-            let count = section.len().min((total - emitted) as usize);
-            let points = &section[..count];
-            // Only fluid near the opening can block it: skip the rest with one distance.
-            let clearance2 = inlet.clearance_m * inlet.clearance_m;
-            let reach = inlet.radius_m + inlet.clearance_m;
-            let p = &self.particles;
-            let blocked = (0..p.len()).any(|i| {
-                p.kind[i] == ParticleKind::Fluid
-                    && (p.position_m[i] - inlet.centre_m).norm_squared() <= reach * reach
-                    && points
-                        .iter()
-                        .any(|x| (p.position_m[i] - x).norm_squared() < clearance2)
-            });
-            if blocked {
-                continue;
-            }
-            let velocity = inlet.unit_direction() * inlet.speed_m_s;
-            let p = &mut self.particles;
-            for x in points {
-                p.push_tagged(*x, ParticleKind::Fluid, inlet.tag);
-                *p.velocity_m_s.last_mut().expect("just pushed") = velocity;
-            }
-            self.inlet_emitted[k] += count as u64;
-        }
-    }
-
-    /// Blow-up guards after a step (finite state, speed limit); fluid that left the domain
-    /// box becomes a ghost, at rest where it left.
-    fn check_state(&mut self) -> Result<(), StepError> {
-        let c = &self.config;
-        // Only fluid particles that fail a guard or left the box need a look, in index order
-        // (found in parallel: most steps there are none).
-        let p = &self.particles;
-        let flagged: Vec<usize> = (0..p.len())
-            .into_par_iter()
-            .with_min_len(PARTICLES_PER_TASK)
-            .filter(|&i| {
-                let (x, v) = (p.position_m[i], p.velocity_m_s[i]);
-                p.kind[i] == ParticleKind::Fluid
-                    && (!x.iter().chain(v.iter()).all(|a| a.is_finite())
-                        || v.norm() > c.max_speed_m_s
-                        || (0..D).any(|a| x[a] < c.domain_min_m[a] || x[a] > c.domain_max_m[a]))
-            })
-            .collect();
-        let p = &mut self.particles;
-        for i in flagged {
-            let (x, v) = (p.position_m[i], p.velocity_m_s[i]);
-            if !x.iter().chain(v.iter()).all(|a| a.is_finite()) {
-                return Err(StepError::NonFinite {
-                    particle: i,
-                    step: self.step,
-                });
-            }
-            let speed = v.norm();
-            if speed > c.max_speed_m_s {
-                return Err(StepError::TooFast {
-                    particle: i,
-                    speed_m_s: speed,
-                    limit_m_s: c.max_speed_m_s,
-                    step: self.step,
-                });
-            }
-            if (0..D).any(|a| x[a] < c.domain_min_m[a] || x[a] > c.domain_max_m[a]) {
-                p.kind[i] = ParticleKind::Ghost;
-                self.listed_at_m.clear();
-                p.velocity_m_s[i] = Vector::<D>::zeros();
-                p.pressure_pa[i] = 0.0;
-                if let Some(limit) = c.max_ghost_particles {
-                    let ghosts = p.count(ParticleKind::Ghost);
-                    if ghosts > limit {
-                        let coords: Vec<String> = x.iter().map(|a| format!("{a:.4}")).collect();
-                        return Err(StepError::LeftDomain {
-                            particle: i,
-                            position_m: format!("({}) m", coords.join(", ")),
-                            ghosts,
-                            limit,
-                            step: self.step,
-                        });
-                    }
-                }
-            }
-        }
-        Ok(())
     }
 }
 

@@ -4,9 +4,10 @@ use super::grid::{KernelPairs, Neighbours};
 use super::kernel::{RefValues, weight};
 use super::operators::{MIN_DET_RATIO, gradient_correction};
 use super::particles::{ParticleKind, Particles, Vector};
-use super::pressure::{CsrMatrix, Preconditioner, SolveReport, solve_pcg_many};
+use super::pressure::{Preconditioner, SolveReport, solve_pcg_many};
 use super::reduce::PARTICLES_PER_TASK;
 use super::rheology::Rheology;
+use super::sparse::CsrMatrix;
 use nalgebra::SMatrix;
 use rayon::prelude::*;
 

@@ -166,7 +166,7 @@ pub fn time_loop<const D: usize>(
     let run_label = format!(
         "{}-{}",
         m.name,
-        &experiment_sha256[..experiment_sha256.len().min(12)]
+        crate::manifest::canonical::short_hash(experiment_sha256)
     );
     let stops_early = m.stop.rest_metric.is_some() || m.stop.non_flowing_fraction.is_some();
     let mut tracked = RowTracker::new(m);

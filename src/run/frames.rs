@@ -26,7 +26,8 @@ pub fn diagnostics<const D: usize>(
         }
     }
     Diagnostics {
-        // A plot-friendly 32-bit field (README): past 2^32 steps it saturates, never wraps.
+        // A plot-friendly 32-bit field (docs/file-format.md): past 2^32 steps it saturates, never
+        // wraps.
         step: u32::try_from(solver.step).unwrap_or(u32::MAX),
         time_s: solver.time_s,
         dt_s,

@@ -145,7 +145,7 @@ pub fn run(resolved: &Resolved, options: &RunOptions) -> Result<RunResult, RunEr
 }
 
 /// A worker pool of `threads` threads (None = all cores), and its size. The split of the work
-/// never depends on it (DESIGN.md section 6).
+/// never depends on it (docs/design.md section 6).
 pub fn thread_pool(threads: Option<usize>) -> Result<(rayon::ThreadPool, usize), RunError> {
     let threads =
         threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));

@@ -190,21 +190,14 @@ pub fn verify(path: &Path, options: &VerifyOptions) -> Result<VerifyReport, Unus
         reason,
     };
     let run = read_run(path).map_err(|e| unusable(e.to_string()))?;
-    let meta_name = run
-        .metadata
-        .get(crate::record::META_MANIFEST)
-        .and_then(|m| m.get("name"))
-        .cloned()
-        .unwrap_or_default();
+    let meta_name = run.manifest_field("name").unwrap_or_default().to_string();
     let mut report = VerifyReport {
         path: path.to_path_buf(),
         name: meta_name,
         experiment_sha256: run
-            .metadata
-            .get(crate::record::META_MANIFEST)
-            .and_then(|m| m.get("experiment_sha256"))
-            .cloned()
-            .unwrap_or_default(),
+            .manifest_field("experiment_sha256")
+            .unwrap_or_default()
+            .to_string(),
         outcome: if run.complete {
             run.summary
                 .as_ref()

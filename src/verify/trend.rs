@@ -8,7 +8,7 @@
 //! must strictly decrease as x increases. The exponent b of y = a x^b is the least-squares
 //! slope of ln y against ln x over the points with x > 0 and y > 0 (ln from std: these
 //! numbers are reported, never part of a simulated state).
-use crate::record::{META_MANIFEST, read_run};
+use crate::record::read_run;
 use std::collections::BTreeMap;
 use std::fmt;
 use std::path::{Path, PathBuf};
@@ -185,11 +185,7 @@ pub fn trend(dir: &Path, options: &TrendOptions) -> Result<TrendReport, String> 
             skipped.push((file, format!("outcome {}", summary.outcome)));
             continue;
         }
-        let Some(canonical) = run
-            .metadata
-            .get(META_MANIFEST)
-            .and_then(|m| m.get("canonical"))
-        else {
+        let Some(canonical) = run.manifest_field("canonical") else {
             skipped.push((file, "no stored manifest".into()));
             continue;
         };

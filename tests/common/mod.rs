@@ -74,6 +74,17 @@ pub fn assert_replays(path: &Path, from: Option<u32>) {
     assert!(report.passed(), "{report}");
 }
 
+/// The `runner` binary as a command to run and assert on.
+pub fn runner() -> assert_cmd::Command {
+    assert_cmd::Command::cargo_bin("runner").unwrap()
+}
+
+/// The `runner` binary as a process to spawn (and signal).
+pub fn runner_process() -> std::process::Command {
+    use assert_cmd::cargo::CommandCargoExt;
+    std::process::Command::cargo_bin("runner").unwrap()
+}
+
 /// Runs the `runner` binary with `args`: its exit code and its stderr.
 pub fn runner_output<S: AsRef<std::ffi::OsStr>>(args: &[S]) -> (Option<i32>, String) {
     let (code, _, stderr) = runner_all(args);
@@ -82,11 +93,7 @@ pub fn runner_output<S: AsRef<std::ffi::OsStr>>(args: &[S]) -> (Option<i32>, Str
 
 /// Runs the `runner` binary with `args`: its exit code, stdout and stderr.
 pub fn runner_all<S: AsRef<std::ffi::OsStr>>(args: &[S]) -> (Option<i32>, String, String) {
-    let out = assert_cmd::Command::cargo_bin("runner")
-        .unwrap()
-        .args(args)
-        .output()
-        .unwrap();
+    let out = runner().args(args).output().unwrap();
     (
         out.status.code(),
         String::from_utf8_lossy(&out.stdout).into_owned(),

@@ -8,8 +8,8 @@
 use super::Solver;
 use crate::mps::kernel::weight;
 use crate::mps::particles::{ParticleKind, Vector};
-use crate::mps::pressure::CsrMatrix;
 use crate::mps::reduce::map_particles;
+use crate::mps::sparse::CsrMatrix;
 use nalgebra::SMatrix;
 
 /// One fluid particle's gradient as a linear map of the increment: (particle, coefficient)

@@ -5,7 +5,7 @@
 //! predicted positions. Its rest state is no equilibrium: the gradient (p_j - p_min form) gives
 //! a flat surface's top row half the support it needs, pressureless dummies leave a few per
 //! cent of g at the walls, and the surface truncates the Laplacian's stencil, so the PPE's
-//! answer is not hydrostatic near the surface (`shared/reference/quiet-mps.md`, section 1).
+//! answer is not hydrostatic near the surface (docs/validation.md, "Holding still").
 //! Here instead (a pressure-correction projection, van Kan 1986, with MPS operators):
 //! - the pressure p^n is carried from the last step and its force enters the prediction:
 //!   u* = u^n + dt (viscous + g - grad(p^n)/rho);
@@ -24,7 +24,7 @@
 //! moves, whatever the Laplacian's truncation: the Laplacian only sets how fast a
 //! disturbance is projected out, not where the rest state lies.
 //!
-//! Two stabilisers for violent flows, both idle at rest (README, "Holding still"): wall
+//! Two stabilisers for violent flows, both idle at rest (docs/validation.md, "Holding still"): wall
 //! support (`wall_support_m`: walls that fluid comes closer to become unknowns of the
 //! increment, and that fluid's carried gradient sees them no lower than itself) and pair
 //! stabilisation (`pair_stabilisation_m`, in `solver.rs`).
@@ -112,7 +112,7 @@ impl<const D: usize> Solver<D> {
         })
     }
 
-    /// Steps (3) and (4) of the incremental scheme at the predicted positions: n*, free
+    /// Step (8) of the incremental scheme at the predicted positions: n*, free
     /// surface, the PPE for the increment dp, the correction with grad(dp) and the new
     /// carried pressure. Returns the PPE report and the count of surface particles.
     pub(super) fn incremental_projection(
