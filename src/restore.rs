@@ -5,7 +5,7 @@ use crate::checkpoint;
 use crate::experiment::{self, Manifest, Resolved, build_scene};
 use crate::mps::Solver;
 use crate::proto::mps::v1::StateCheckpoint;
-use crate::record::{META_MANIFEST, RunFile};
+use crate::record::{META_MANIFEST, RunFile, time_text};
 use crate::run::solver_config;
 
 /// Why a recorded manifest cannot be taken back up.
@@ -105,7 +105,10 @@ pub fn restore_solver<const D: usize>(
     if recomputed != msg.state_sha256 {
         return Err(format!(
             "checkpoint {} (step {}, t = {} s): stored state_sha256 {} does not match its contents ({recomputed})",
-            msg.index, msg.step, msg.time_s, msg.state_sha256
+            msg.index,
+            msg.step,
+            time_text(msg.time_s),
+            msg.state_sha256
         ));
     }
     let scene = build_scene::<D>(m);
@@ -119,7 +122,7 @@ pub fn restore_solver<const D: usize>(
             "checkpoint {} (step {}, t = {} s) holds {} particles, but the scene has {} and its inlets poured {}",
             msg.index,
             msg.step,
-            msg.time_s,
+            time_text(msg.time_s),
             solver.particles.len(),
             scene.particles.len(),
             expected - scene.particles.len() as u64
@@ -129,7 +132,10 @@ pub fn restore_solver<const D: usize>(
     if dt.to_bits() != msg.dt_s.to_bits() {
         return Err(format!(
             "checkpoint {} (step {}, t = {} s): its dt_s {:e} is not the step its state gives ({dt:e})",
-            msg.index, msg.step, msg.time_s, msg.dt_s
+            msg.index,
+            msg.step,
+            time_text(msg.time_s),
+            msg.dt_s
         ));
     }
     Ok(solver)

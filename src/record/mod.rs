@@ -506,3 +506,11 @@ fn sync_parent_dir(path: &Path) -> Result<()> {
 fn sync_parent_dir(_path: &Path) -> Result<()> {
     Ok(())
 }
+
+/// A simulated time for titles and messages: to the microsecond, trailing zeros dropped (`0.3`, not
+/// `0.30000000000000004`).
+pub fn time_text(t_s: f64) -> String {
+    let s = format!("{t_s:.6}");
+    let s = s.trim_end_matches('0');
+    s.strip_suffix('.').unwrap_or(s).to_string()
+}

@@ -412,13 +412,7 @@ pub fn default_sweep_metrics(metrics: &BTreeMap<String, f64>) -> Vec<String> {
         .collect()
 }
 
-/// A simulated time for titles: to the microsecond, trailing zeros dropped (`0.3`, not
-/// `0.30000000000000004`).
-pub fn time_text(t_s: f64) -> String {
-    let s = format!("{t_s:.6}");
-    let s = s.trim_end_matches('0');
-    s.strip_suffix('.').unwrap_or(s).to_string()
-}
+pub use crate::record::time_text;
 
 /// `runner snapshot`: the last `/particles` frame of a run, or the one nearest `time_s`,
 /// coloured by `field` (default `kind`). Default output:

@@ -51,7 +51,10 @@ impl fmt::Display for Mismatch {
         write!(
             f,
             "checkpoint {} (logged step {}, t = {} s): {}",
-            self.checkpoint, self.step, self.time_s, self.detail
+            self.checkpoint,
+            self.step,
+            crate::record::time_text(self.time_s),
+            self.detail
         )
     }
 }
@@ -268,7 +271,10 @@ pub fn verify(path: &Path, options: &VerifyOptions) -> Result<VerifyReport, Unus
         if h != s.state_sha256 {
             report.problems.push(format!(
                 "checkpoint {} (step {}, t = {} s): stored state_sha256 {} does not match the logged state ({h})",
-                s.index, s.step, s.time_s, s.state_sha256
+                s.index,
+                s.step,
+                crate::record::time_text(s.time_s),
+                s.state_sha256
             ));
         }
     }
@@ -447,7 +453,8 @@ impl Sink for Compare<'_> {
         } else if i > self.last {
             Some(format!(
                 "the replay wrote checkpoint {i} (step {}, t = {} s) past the last one compared",
-                msg.step, msg.time_s
+                msg.step,
+                crate::record::time_text(msg.time_s)
             ))
         } else {
             compare::first_difference(&self.logged[i], msg)
