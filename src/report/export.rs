@@ -242,16 +242,19 @@ pub fn export_file(path: &Path) -> Result<(Table, Table)> {
     Ok((diagnostics, summary))
 }
 
+/// Files of a folder left out of its table, each with why.
+pub type LeftOut = Vec<(PathBuf, String)>;
+
 /// `runner export DIR`: the summary table of the run files (`*.mcap`) in `dir`, and the files
 /// left out (unreadable, or unfinished: no `/summary` message) with why.
-pub fn export_dir(dir: &Path) -> Result<(Table, Vec<(PathBuf, String)>)> {
+pub fn export_dir(dir: &Path) -> Result<(Table, LeftOut)> {
     let (runs, skipped) = finished_rows(dir)?;
     Ok((summary_table(&runs), skipped))
 }
 
 /// The finished run files (`*.mcap`) of `dir` as rows, and the files left out with why; an
 /// error when none is finished.
-pub fn finished_rows(dir: &Path) -> Result<(Vec<RunRow>, Vec<(PathBuf, String)>)> {
+pub fn finished_rows(dir: &Path) -> Result<(Vec<RunRow>, LeftOut)> {
     let mut runs = Vec::new();
     let mut skipped = Vec::new();
     for file in run_files(dir)? {
