@@ -15,13 +15,12 @@ mod table;
 use child::Measured;
 use std::ffi::OsString;
 use std::path::{Path, PathBuf};
-use std::process::ExitCode;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use suite_file::{Case, Scaling, Suite};
 use table::{CaseRow, NA, ScalePoint};
 
-use super::{EXIT_BAD_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED, EXIT_SIM_FAILED};
+use crate::error::{self, CliError, Done};
 
 /// `runner bench --suite` options.
 #[derive(Debug)]
@@ -42,28 +41,12 @@ struct Runner {
     build: String,
 }
 
-pub fn suite_command(args: SuiteArgs) -> ExitCode {
-    let suite = match suite_file::load(&args.suite, args.quick) {
-        Ok(s) => s,
-        Err(e) => {
-            eprintln!("error: {e}");
-            return ExitCode::from(EXIT_BAD_INPUT);
-        }
-    };
-    let suite = match only_cases(suite, &args.cases) {
-        Ok(s) => s,
-        Err(why) => {
-            eprintln!("error: --case: {why}");
-            return ExitCode::from(EXIT_BAD_INPUT);
-        }
-    };
-    let runner = match runner(args.runner.as_deref()) {
-        Ok(r) => r,
-        Err(why) => {
-            eprintln!("error: {why}");
-            return ExitCode::from(EXIT_BAD_INPUT);
-        }
-    };
+/// Runs every case (then the scaling series) and prints the tables, also after an interrupt.
+pub fn command(args: SuiteArgs) -> error::Result {
+    let suite = suite_file::load(&args.suite, args.quick)?;
+    let suite = only_cases(suite, &args.cases)
+        .map_err(|why| CliError::BadInput(format!("--case: {why}")))?;
+    let runner = runner(args.runner.as_deref()).map_err(CliError::BadInput)?;
     let interrupted = interrupt_flag();
     let mut all_completed = true;
     let rows = run_cases(&suite, &runner, &args, &interrupted, &mut all_completed);
@@ -75,19 +58,17 @@ pub fn suite_command(args: SuiteArgs) -> ExitCode {
     };
     let text = markdown(&suite, &runner, &args, &rows, &points);
     print!("{text}");
-    if let Some(path) = &args.markdown
-        && let Err(e) = std::fs::write(path, &text)
-    {
-        eprintln!("error: cannot write {}: {e}", path.display());
-        return ExitCode::from(EXIT_INTERNAL);
+    if let Some(path) = &args.markdown {
+        std::fs::write(path, &text)
+            .map_err(|e| CliError::Internal(format!("cannot write {}: {e}", path.display())))?;
     }
-    if interrupted.load(Ordering::SeqCst) {
-        ExitCode::from(EXIT_INTERRUPTED)
+    Ok(if interrupted.load(Ordering::SeqCst) {
+        Done::Interrupted
     } else if all_completed {
-        ExitCode::SUCCESS
+        Done::Success
     } else {
-        ExitCode::from(EXIT_SIM_FAILED)
-    }
+        Done::SimFailed
+    })
 }
 
 /// The suite cut to the cases named by `--case` (all when none is named); `scaling` names the
