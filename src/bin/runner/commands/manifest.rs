@@ -42,7 +42,7 @@ pub fn expand(args: ExpandArgs) -> Result {
     let n = s.points.len();
     for (k, point) in s.points.iter().enumerate() {
         let r = &point.resolved;
-        let file = dir.join(format!("{}-{}.yaml", r.manifest.name, &r.hash_hex[..12]));
+        let file = dir.join(format!("{}-{}.yaml", r.manifest.name, r.short_hash()));
         // JSON is YAML: the canonical form itself, under a comment naming the point.
         let pretty = serde_json::from_str::<serde_json::Value>(&r.canonical)
             .and_then(|v| serde_json::to_string_pretty(&v))
