@@ -6,7 +6,7 @@ use super::{CalibrateError, Pair, Plan, Response};
 use std::collections::BTreeMap;
 
 /// The fitted values that stiffen the concrete: for these the test's
-/// [`crate::experiment::Experiment::stiffening_response`] gives the direction of the search.
+/// [`crate::experiment::SceneSpec::stiffening_response`] gives the direction of the search.
 const STIFFENING_VALUES: &[&str] = &["fluid.yield_stress_pa", "fluid.plastic_viscosity_pa_s"];
 
 /// A parameter value rounded to 4 significant digits: runs get tidy manifests, and a value

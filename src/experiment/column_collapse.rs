@@ -19,11 +19,8 @@ pub struct ColumnCollapse {
 }
 
 impl Experiment for ColumnCollapse {
-    fn stiffening_response(&self, m: &Manifest, metric: &str) -> Option<super::Response> {
-        match metric {
-            "heap_length_m" => Some(super::Response::FlowMeasure),
-            _ => super::crossing_time(&self.crossings(m), metric),
-        }
+    fn flow_measures(&self) -> &'static [&'static str] {
+        &["heap_length_m"]
     }
 
     fn check(&self, m: &Manifest, c: &mut Checker) {

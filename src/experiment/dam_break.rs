@@ -39,11 +39,8 @@ impl Default for DamBreak {
 }
 
 impl Experiment for DamBreak {
-    fn stiffening_response(&self, m: &Manifest, metric: &str) -> Option<super::Response> {
-        match metric {
-            "front_position_m" => Some(super::Response::FlowMeasure),
-            _ => super::crossing_time(&self.crossings(m), metric),
-        }
+    fn flow_measures(&self) -> &'static [&'static str] {
+        &["front_position_m"]
     }
 
     fn check(&self, m: &Manifest, c: &mut Checker) {

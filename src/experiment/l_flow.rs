@@ -44,11 +44,8 @@ impl Default for LFlow {
 }
 
 impl Experiment for LFlow {
-    fn stiffening_response(&self, m: &Manifest, metric: &str) -> Option<super::Response> {
-        match metric {
-            "l_flow_value_m" => Some(super::Response::FlowMeasure),
-            _ => super::crossing_time(&self.crossings(m), metric),
-        }
+    fn flow_measures(&self) -> &'static [&'static str] {
+        &["l_flow_value_m"]
     }
 
     fn check(&self, m: &Manifest, c: &mut Checker) {

@@ -88,11 +88,8 @@ impl Default for LbBox {
 const SURFACE_SHARES: [(&str, f64); 3] = [("x25", 0.25), ("x50", 0.5), ("x75", 0.75)];
 
 impl Experiment for LbBox {
-    fn stiffening_response(&self, m: &Manifest, metric: &str) -> Option<super::Response> {
-        match metric {
-            "filling_distance_m" | "filling_rate" => Some(super::Response::FlowMeasure),
-            _ => super::crossing_time(&self.crossings(m), metric),
-        }
+    fn flow_measures(&self) -> &'static [&'static str] {
+        &["filling_distance_m", "filling_rate"]
     }
 
     fn surface_profile(

@@ -89,11 +89,11 @@ pub trait Experiment {
     fn yield_stress_guess_pa(&self, _m: &Manifest, _metric: &str, _value: f64) -> Option<f64> {
         None
     }
-    /// How summary metric `metric` responds when the concrete stiffens (a higher yield stress
-    /// or plastic viscosity), where the test knows: the direction `runner calibrate` steps
-    /// in. By default the test's crossings are flow times and nothing else is known.
-    fn stiffening_response(&self, m: &Manifest, metric: &str) -> Option<Response> {
-        crossing_time(&self.crossings(m), metric)
+    /// The summary metrics that are flow measures (a spread, a front, a filling distance or
+    /// rate): they fall as the concrete stiffens. With the test's crossings (flow times, which
+    /// rise) they tell `runner calibrate` which way to step ([`SceneSpec::stiffening_response`]).
+    fn flow_measures(&self) -> &'static [&'static str] {
+        &[]
     }
     /// The free surface of a 3D state at `time_s` against the test's closed form (the figure
     /// and table of `runner profile` and of the report), headed by `title`; `None` for a
@@ -110,7 +110,7 @@ pub trait Experiment {
 }
 
 /// How a summary metric responds when the concrete stiffens
-/// ([`Experiment::stiffening_response`]).
+/// ([`SceneSpec::stiffening_response`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Response {
     /// A flow measure (a spread, a filling distance or rate): falls as the yield stress or
@@ -119,15 +119,6 @@ pub enum Response {
     /// A flow time (t500, t200): rises as either rises, in proportion to the plastic
     /// viscosity (the viscous time scale mu_p / (rho g H)).
     FlowTime,
-}
-
-/// [`Response::FlowTime`] when `metric` is one of `crossings` (each the time at which a flow
-/// measure reaches a threshold).
-pub fn crossing_time(crossings: &[Crossing], metric: &str) -> Option<Response> {
-    crossings
-        .iter()
-        .any(|c| c.name == metric)
-        .then_some(Response::FlowTime)
 }
 
 /// Declares the tests: their modules, the [`SceneSpec`] enum (one variant per `scene.kind`)
@@ -223,9 +214,19 @@ impl SceneSpec {
     pub fn trend_metric(&self) -> &'static str {
         with_experiment!(self, e => e.trend_metric())
     }
-    /// See [`Experiment::stiffening_response`].
+    /// How summary metric `metric` responds when the concrete stiffens (a higher yield stress
+    /// or plastic viscosity), where the test says: one of its flow measures falls, one of its
+    /// crossings (the time a flow measure reaches a threshold) rises.
     pub fn stiffening_response(&self, m: &Manifest, metric: &str) -> Option<Response> {
-        with_experiment!(self, e => e.stiffening_response(m, metric))
+        with_experiment!(self, e => {
+            if e.flow_measures().contains(&metric) {
+                Some(Response::FlowMeasure)
+            } else if e.crossings(m).iter().any(|c| c.name == metric) {
+                Some(Response::FlowTime)
+            } else {
+                None
+            }
+        })
     }
     /// See [`Experiment::surface_profile`].
     pub fn surface_profile(

@@ -59,14 +59,8 @@ impl Default for Slump {
 }
 
 impl Experiment for Slump {
-    fn stiffening_response(&self, m: &Manifest, metric: &str) -> Option<super::Response> {
-        match metric {
-            "spread_radius_mean_m"
-            | "spread_radius_min_m"
-            | "spread_radius_max_m"
-            | "spread_diameter_m" => Some(super::Response::FlowMeasure),
-            _ => super::crossing_time(&self.crossings(m), metric),
-        }
+    fn flow_measures(&self) -> &'static [&'static str] {
+        &["spread_radius_mean_m", "spread_radius_min_m", "spread_radius_max_m", "spread_diameter_m"]
     }
 
     fn surface_profile(
