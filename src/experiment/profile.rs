@@ -2,7 +2,7 @@
 //! table ([`super::Experiment::surface_profile`]); `runner profile` and the report draw it
 //! without knowing which test it came from.
 
-/// One line of a profile figure.
+/// One labelled line of a figure (the report draws it as `report::plot::Series`).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Curve {
     pub label: String,

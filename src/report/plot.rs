@@ -11,12 +11,8 @@ use plotters::prelude::*;
 use super::cloud::Frame;
 use super::{ReportError, Result};
 
-/// One line of a chart.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Series {
-    pub label: String,
-    pub points: Vec<(f64, f64)>,
-}
+/// One line of a chart: the tests' profile curves are drawn as they are.
+pub use crate::experiment::Curve as Series;
 
 /// Distinct colours for series and categories (Tableau 10).
 pub const PALETTE: [RGBColor; 10] = [

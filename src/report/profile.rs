@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 
 use super::plot::{self, Series};
 use super::{ReportError, Result, beside, read, run_title};
-use crate::experiment::{Curve, SurfaceProfile};
+use crate::experiment::SurfaceProfile;
 use crate::record::RunFile;
 
 /// `runner profile`: the surface at rest of a run against its closed form, as a table
@@ -31,7 +31,6 @@ fn draw(run: &RunFile, mcap: &Path, out: Option<&Path>) -> Result<Option<(PathBu
     let series: Vec<Series> = std::iter::once(fig.surface)
         .chain(fig.closed_at_measured)
         .chain(fig.closed_for_volume)
-        .map(series)
         .collect();
     plot::line_plot(&out, &title, fig.x_label, "h [m]", &series, false)?;
     Ok(Some((out, fig.table)))
@@ -88,13 +87,6 @@ pub fn profiles(mcaps: &[PathBuf], out: Option<&Path>) -> Result<(PathBuf, Strin
         .collect::<Vec<_>>()
         .join("\n");
     Ok((out, table))
-}
-
-fn series(c: Curve) -> Series {
-    Series {
-        label: c.label,
-        points: c.points,
-    }
 }
 
 fn scene_kind(run: &RunFile) -> String {
