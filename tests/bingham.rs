@@ -50,6 +50,7 @@ fn bingham_poiseuille(
         max_iterations: 10_000,
         gradient: mps_runner::mps::viscosity::StrainRateGradient::Plain,
         wall_surface_m: None,
+        slip_walls: Vec::new(),
     };
     let force = Vector::<2>::new(g_pa_m / rho, 0.0);
     let dt_s = 0.05;

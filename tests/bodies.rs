@@ -127,7 +127,12 @@ fn scene<const D: usize>(path: Path<D>) -> (Solver<D>, Vec<Vector<D>>) {
     let end = p.len();
     let initial = p.position_m[first..end].to_vec();
     let mut c = config::<D>(l0, lo, hi);
-    c.bodies = vec![RigidBody { first, end, path }];
+    c.bodies = vec![RigidBody {
+        first,
+        end,
+        path,
+        slip_length_m: None,
+    }];
     (Solver::new(c, p), initial)
 }
 

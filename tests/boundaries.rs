@@ -197,6 +197,10 @@ fn bad_boundaries_are_refused_naming_the_field() {
             "boundaries.bodies.0.repeat_s=0.5",
             "boundaries.bodies.0.repeat_s",
         ),
+        (
+            "boundaries.bodies.0.slip_length_m=-0.01",
+            "boundaries.bodies.0.slip_length_m: must be a finite number >= 0",
+        ),
         ("boundaries.tags.0.tag=70000", "boundaries.tags.0.tag"),
         (
             "boundaries.inlets.1.tag=1",

@@ -1024,3 +1024,24 @@ fn a_list_where_a_number_belongs_is_named_as_such() {
         "{e}"
     );
 }
+
+#[test]
+fn slip_lengths_of_the_rod_and_the_cone_are_part_of_the_experiment_only_when_set() {
+    for (file, field) in [
+        ("rodding_2d.yaml", "scene.rod_slip_length_m"),
+        ("slump_3d.yaml", "scene.cone_slip_length_m"),
+    ] {
+        let key = field.trim_start_matches("scene.");
+        let path = common::experiment(file);
+        let plain = experiment::load(&path, &[]).unwrap();
+        // Absent: the canonical form (and so every hash and file written before) is unchanged.
+        assert!(!plain.canonical.contains(key), "{}", plain.canonical);
+        let set = experiment::load(&path, &[format!("{field}=0.002")]).unwrap();
+        assert!(set.canonical.contains(&format!("\"{key}\":0.002")));
+        assert_ne!(plain.hash_hex, set.hash_hex);
+        let e = experiment::load(&path, &[format!("{field}=-0.001")])
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains(field) && e.contains("-0.001"), "{e}");
+    }
+}

@@ -343,8 +343,9 @@ fn corrected_velocity_gradient_is_exact_up_to_the_free_surface() {
         .collect();
     assert!(top.len() >= 4);
     for &i in &top {
-        let corrected = velocity_gradient(&p, &nb, &refs, i, StrainRateGradient::Corrected, None);
-        let plain = velocity_gradient(&p, &nb, &refs, i, StrainRateGradient::Plain, None);
+        let corrected =
+            velocity_gradient(&p, &nb, &refs, i, StrainRateGradient::Corrected, None, &[]);
+        let plain = velocity_gradient(&p, &nb, &refs, i, StrainRateGradient::Plain, None, &[]);
         assert!(
             (corrected[(0, 1)] - shear).abs() < 1e-9 * shear && corrected[(1, 0)].abs() < 1e-9,
             "corrected du/dy {} at the surface, expected {shear}",
@@ -436,7 +437,7 @@ fn wall_surface_no_slip_makes_the_shear_exact_next_to_the_floor() {
             StrainRateGradient::Corrected,
             StrainRateGradient::Quadratic,
         ] {
-            let g = velocity_gradient(&p, &nb, &refs, i, model, Some(0.5 * l0));
+            let g = velocity_gradient(&p, &nb, &refs, i, model, Some(0.5 * l0), &[]);
             assert!(
                 (g[(0, 1)] - shear).abs() < 1e-9 * shear && g[(1, 0)].abs() < 1e-9,
                 "du/dy {} at y = {}, expected {shear} ({model:?})",
@@ -451,7 +452,7 @@ fn wall_surface_no_slip_makes_the_shear_exact_next_to_the_floor() {
         .copied()
         .find(|&i| p.position_m[i][1] < l0)
         .unwrap();
-    let own = velocity_gradient(&p, &nb, &refs, bottom, StrainRateGradient::Plain, None);
+    let own = velocity_gradient(&p, &nb, &refs, bottom, StrainRateGradient::Plain, None, &[]);
     assert!(
         own[(0, 1)] < 0.85 * shear,
         "du/dy {} with own velocity",
@@ -500,6 +501,7 @@ fn quadratic_strain_rate_is_exact_for_a_parabolic_profile_from_floor_to_surface(
             i,
             StrainRateGradient::Quadratic,
             Some(0.5 * l0),
+            &[],
         );
         assert!(
             (q[(0, 1)] - slope(y)).abs() < 1e-9 * a && q[(1, 0)].abs() < 1e-9 * a,
@@ -514,6 +516,7 @@ fn quadratic_strain_rate_is_exact_for_a_parabolic_profile_from_floor_to_surface(
             i,
             StrainRateGradient::Corrected,
             Some(0.5 * l0),
+            &[],
         );
         worst_corrected = worst_corrected.max((c[(0, 1)] - slope(y)).abs() / a);
     }

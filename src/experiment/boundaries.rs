@@ -191,13 +191,14 @@ pub fn apply<const D: usize>(m: &Manifest, scene: &mut Scene<D>) {
     for solid in &obstacles {
         fill_solid(p, solid, spacing_m, walls, dummies, &mut taken);
     }
-    for (solid, path) in bodies.iter().zip(paths) {
+    for ((solid, path), spec) in bodies.iter().zip(paths).zip(&b.bodies) {
         let first = p.len();
         fill_solid(p, solid, spacing_m, walls, dummies, &mut taken);
         scene.bodies.push(RigidBody {
             first,
             end: p.len(),
             path,
+            slip_length_m: spec.slip_length_m,
         });
     }
     scene

@@ -45,6 +45,9 @@ pub struct Rodding {
     pub rod_speed_m_s: f64,
     /// When the first stroke starts, in seconds (the concrete settles before).
     pub start_s: f64,
+    /// Navier slip length of the rod's steel, in metres (0: no slip at its surface; large:
+    /// free slip). Absent: the rod's particles carry its velocity, as every wall does.
+    pub rod_slip_length_m: Option<f64>,
 }
 
 impl Default for Rodding {
@@ -61,6 +64,7 @@ impl Default for Rodding {
             rod_clearance_m: 0.02,
             rod_speed_m_s: 0.25,
             start_s: 0.2,
+            rod_slip_length_m: None,
         }
     }
 }
@@ -163,6 +167,9 @@ impl Experiment for Rodding {
             ok &= c.real(field, x, POSITIVE);
         }
         ok &= c.real("scene.start_s", self.start_s, NON_NEGATIVE);
+        if let Some(b) = self.rod_slip_length_m {
+            ok &= c.real("scene.rod_slip_length_m", b, NON_NEGATIVE);
+        }
         ok &= c.int_at_least("scene.strokes", u64::from(self.strokes), 1);
         if self.stroke_positions_m.is_empty() {
             c.fail(
@@ -332,6 +339,7 @@ impl Experiment for Rodding {
             first,
             end: particles.len(),
             path,
+            slip_length_m: self.rod_slip_length_m,
         }];
         let (domain_min_m, domain_max_m) = self.domain::<D>(m);
         Scene {

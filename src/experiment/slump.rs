@@ -42,6 +42,9 @@ pub struct Slump {
     pub lift_start_s: f64,
     /// How far the cone is lifted, in metres; it then stays there, clear of the concrete.
     pub lift_height_m: f64,
+    /// Navier slip length of the cone's steel, in metres (0: no slip at its surface; large:
+    /// free slip). Absent: the cone's particles carry its velocity, as every wall does.
+    pub cone_slip_length_m: Option<f64>,
 }
 
 impl Default for Slump {
@@ -54,6 +57,7 @@ impl Default for Slump {
             lift_speed_m_s: 0.2,
             lift_start_s: 0.0,
             lift_height_m: 0.4,
+            cone_slip_length_m: None,
         }
     }
 }
@@ -85,6 +89,9 @@ impl Experiment for Slump {
             all_ok &= c.real(field, x, POSITIVE);
         }
         c.real("scene.lift_speed_m_s", self.lift_speed_m_s, NON_NEGATIVE);
+        if let Some(b) = self.cone_slip_length_m {
+            c.real("scene.cone_slip_length_m", b, NON_NEGATIVE);
+        }
         c.real("scene.lift_start_s", self.lift_start_s, NON_NEGATIVE);
         c.real("scene.lift_height_m", self.lift_height_m, POSITIVE);
         if all_ok {
@@ -458,6 +465,7 @@ pub fn build<const D: usize>(
                         along_z(p.lift_speed_m_s),
                         along_z(p.lift_height_m),
                     ),
+                    slip_length_m: p.cone_slip_length_m,
                 }
             })
             .into_iter()

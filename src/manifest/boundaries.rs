@@ -45,6 +45,10 @@ pub struct Body {
     /// keyframes span; the last offset is held in the gap). null = no repeat.
     #[serde(default)]
     pub repeat_s: Option<f64>,
+    /// Navier slip length of the body's surface, metres (0: no slip at the surface; large:
+    /// free slip). Absent: its particles carry the body's velocity, as every wall does.
+    #[serde(default)]
+    pub slip_length_m: Option<f64>,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -189,6 +193,14 @@ fn check_path(body: &Body, d: usize, at: &str, out: &mut Vec<(String, String)>) 
                 ),
             ));
         }
+    }
+    if let Some(b) = body.slip_length_m
+        && !(b.is_finite() && b >= 0.0)
+    {
+        out.push((
+            format!("{at}.slip_length_m"),
+            format!("must be a finite number >= 0 (metres), got {b:?}"),
+        ));
     }
 }
 

@@ -11,8 +11,8 @@
 //! at 0 (and under the standard scheme), `mps.corrected_strain_rate`,
 //! `mps.wall_surface_no_slip`, `mps.quadratic_strain_rate` and `mps.exact_projection` (also
 //! under the standard scheme) false, `stop.rest_*` without `stop.rest_metric`, null
-//! `mps.wall_collision_*`, `time.dt_min_s` and `stop.max_ghost_particles`, an empty
-//! `boundaries` section), so every experiment keeps the hash it had before they existed and
+//! `mps.wall_collision_*`, `time.dt_min_s`, `stop.max_ghost_particles` and the rod's, the
+//! cone's and the bodies' slip lengths, an empty `boundaries` section), so every experiment keeps the hash it had before they existed and
 //! files written then still verify. JSON is YAML, so the canonical text loads back through
 //! [`super::from_str`] to the same manifest and hash.
 
@@ -92,12 +92,25 @@ pub fn canonical_text<S: SceneSection>(manifest: &Manifest<S>) -> String {
         ("mps", "wall_collision_second_pass"),
         ("time", "dt_min_s"),
         ("stop", "max_ghost_particles"),
+        ("scene", "rod_slip_length_m"),
+        ("scene", "cone_slip_length_m"),
     ] {
         // null = the rule that held before these fields existed.
         if let Some(map) = value.get_mut(section).and_then(Value::as_object_mut)
             && map.get(key).is_some_and(Value::is_null)
         {
             map.remove(key);
+        }
+    }
+    // A body without a slip length carries its velocity as walls did before the field.
+    if let Some(bodies) = value
+        .pointer_mut("/boundaries/bodies")
+        .and_then(Value::as_array_mut)
+    {
+        for body in bodies.iter_mut().filter_map(Value::as_object_mut) {
+            if body.get("slip_length_m").is_some_and(Value::is_null) {
+                body.remove("slip_length_m");
+            }
         }
     }
     if manifest.boundaries.is_empty()

@@ -192,4 +192,8 @@ pub struct RigidBody<const D: usize> {
     pub first: usize,
     pub end: usize,
     pub path: Path<D>,
+    /// Navier slip length of the body's surface, in metres (see
+    /// [`crate::mps::viscosity::SlipWall`]); None: its particles carry the path velocity as
+    /// every wall does.
+    pub slip_length_m: Option<f64>,
 }

@@ -17,7 +17,7 @@ use super::pressure::SolveReport;
 use super::reduce::PARTICLES_PER_TASK;
 use super::reduce::max_by;
 use super::rheology::Rheology;
-use super::viscosity::{StrainRateGradient, ViscousSettings, predict_velocity};
+use super::viscosity::{SlipWall, StrainRateGradient, ViscousSettings, predict_velocity};
 use rayon::prelude::*;
 use std::time::Instant;
 
@@ -377,6 +377,17 @@ impl<const D: usize> Solver<D> {
             max_iterations: c.viscosity_max_iterations,
             gradient: c.strain_rate_gradient,
             wall_surface_m: c.wall_surface_no_slip.then_some(0.5 * c.spacing_m),
+            slip_walls: c
+                .bodies
+                .iter()
+                .filter_map(|b| {
+                    b.slip_length_m.map(|slip_length_m| SlipWall {
+                        particles: b.first..b.end,
+                        slip_length_m,
+                        surface_m: 0.5 * c.spacing_m,
+                    })
+                })
+                .collect(),
         }
     }
 

@@ -12,7 +12,7 @@ use nalgebra::SMatrix;
 use rayon::prelude::*;
 
 /// Settings of the viscous stage.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct ViscousSettings {
     pub rheology: Rheology,
     pub density_kg_m3: f64,
@@ -26,6 +26,72 @@ pub struct ViscousSettings {
     /// their own velocity); `Some(s)` at the walls' surface, s in front of the nearest wall
     /// particle (half a spacing on a lattice), see [`WallFrame`].
     pub wall_surface_m: Option<f64>,
+    /// Rigid bodies whose walls have Navier slip (empty: every wall as above).
+    pub slip_walls: Vec<SlipWall>,
+}
+
+/// A rigid body's walls with Navier slip, u_s = b du_t/dn at the body's surface (steel in fresh
+/// concrete slips; a no-slip rod drags a column of concrete out of the form, issue "Rodding").
+/// The surface lies `surface_m` in front of the body's outer particles (half a spacing on its
+/// lattice). A wall or dummy neighbour j of fluid particle i, d_j behind that surface with i
+/// d_i in front of it, carries u_w + (u_i - u_w)(b - d_j)/(b + d_i): the linear profile
+/// through i with that slip. Its pair term (u_j - u_i) becomes (1 + d_j/d_i) d_i/(d_i + b)
+/// (u_w - u_i): b = 0 is no slip at the surface ([`WallFrame::factor`]), a large b free slip.
+/// The factor acts on the whole relative velocity: the normal part is the pressure's to stop.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SlipWall {
+    /// The body's particles.
+    pub particles: std::ops::Range<usize>,
+    /// Slip length b >= 0, in metres.
+    pub slip_length_m: f64,
+    /// Distance of the body's surface in front of its outer particles, in metres.
+    pub surface_m: f64,
+}
+
+/// The slip wall that particle j belongs to, if any.
+#[inline]
+fn slip_wall_of(slip_walls: &[SlipWall], j: usize) -> Option<&SlipWall> {
+    slip_walls.iter().find(|w| w.particles.contains(&j))
+}
+
+/// The walls a fluid particle's pair terms see: the no-slip frame (`wall_surface_m`) of the
+/// walls that do not slip, and the frame of the slip walls.
+#[derive(Debug, Clone, Copy)]
+struct Frames<const D: usize> {
+    no_slip: Option<WallFrame<D>>,
+    slip: Option<WallFrame<D>>,
+}
+
+impl<const D: usize> Frames<D> {
+    fn of(
+        p: &Particles<D>,
+        nb: &Neighbours,
+        i: usize,
+        radius_m: f64,
+        wall_surface_m: Option<f64>,
+        slip_walls: &[SlipWall],
+    ) -> Self {
+        let plain = |j: usize| slip_walls.is_empty() || slip_wall_of(slip_walls, j).is_none();
+        let no_slip = wall_surface_m.and_then(|s| WallFrame::of(p, nb, i, radius_m, s, plain));
+        let slip = slip_walls.first().and_then(|w| {
+            WallFrame::of(p, nb, i, radius_m, w.surface_m, |j| {
+                slip_wall_of(slip_walls, j).is_some()
+            })
+        });
+        Self { no_slip, slip }
+    }
+
+    /// The factor of wall or dummy neighbour j's pair term (u_j - u_i) at displacement r_ij
+    /// (1 for a wall that carries its own velocity).
+    #[inline]
+    fn factor(&self, slip_walls: &[SlipWall], j: usize, r_ij: &Vector<D>) -> f64 {
+        if let Some(wall) = slip_wall_of(slip_walls, j)
+            && let Some(f) = &self.slip
+        {
+            return f.factor(r_ij) * f.gap_m / (f.gap_m + wall.slip_length_m);
+        }
+        self.no_slip.as_ref().map_or(1.0, |f| f.factor(r_ij))
+    }
 }
 
 /// The velocity gradient model of the strain rate.
@@ -54,7 +120,8 @@ pub struct WallFrame<const D: usize> {
 }
 
 impl<const D: usize> WallFrame<D> {
-    /// The frame of fluid particle i from its non-fluid neighbours within `radius_m` (normal:
+    /// The frame of fluid particle i from its non-fluid neighbours within `radius_m` that
+    /// `counts` accepts (normal:
     /// their weighted mean direction; surface: `surface_m` in front of the nearest one along
     /// it). `None` without wall neighbours. The gap is at least half `surface_m`, so that a
     /// particle pushed against a wall keeps a bounded coupling.
@@ -64,11 +131,13 @@ impl<const D: usize> WallFrame<D> {
         i: usize,
         radius_m: f64,
         surface_m: f64,
+        counts: impl Fn(usize) -> bool,
     ) -> Option<Self> {
+        let wall = |j: usize| p.kind[j] != ParticleKind::Fluid && counts(j);
         let mut sum = Vector::<D>::zeros();
         for &j in nb.of(i) {
             let j = j as usize;
-            if p.kind[j] != ParticleKind::Fluid {
+            if wall(j) {
                 let r = nb.displacement(&p.position_m, i, j);
                 sum += r * weight(r.norm(), radius_m);
             }
@@ -81,7 +150,7 @@ impl<const D: usize> WallFrame<D> {
         let mut nearest = f64::INFINITY;
         for &j in nb.of(i) {
             let j = j as usize;
-            if p.kind[j] != ParticleKind::Fluid {
+            if wall(j) {
                 let r = nb.displacement(&p.position_m, i, j);
                 if weight(r.norm(), radius_m) > 0.0 {
                     nearest = nearest.min(r.dot(&normal));
@@ -134,10 +203,11 @@ pub fn velocity_gradient<const D: usize>(
     i: usize,
     model: StrainRateGradient,
     wall_surface_m: Option<f64>,
+    slip_walls: &[SlipWall],
 ) -> SMatrix<f64, D, D> {
-    let frame = wall_surface_m.and_then(|s| WallFrame::of(p, nb, i, refs.radius_n_m, s));
+    let frames = Frames::of(p, nb, i, refs.radius_n_m, wall_surface_m, slip_walls);
     if model == StrainRateGradient::Quadratic
-        && let Some(g) = quadratic_gradient(p, nb, refs, i, frame.as_ref())
+        && let Some(g) = quadratic_gradient(p, nb, refs, i, &frames, slip_walls)
     {
         return g;
     }
@@ -153,9 +223,10 @@ pub fn velocity_gradient<const D: usize>(
         if w == 0.0 {
             continue;
         }
-        let du = match frame {
-            Some(f) if p.kind[j] != ParticleKind::Fluid => (p.velocity_m_s[j] - ui) * f.factor(&r),
-            _ => p.velocity_m_s[j] - ui,
+        let du = if p.kind[j] == ParticleKind::Fluid {
+            p.velocity_m_s[j] - ui
+        } else {
+            (p.velocity_m_s[j] - ui) * frames.factor(slip_walls, j, &r)
         };
         g += du * (r.transpose() * (w / r2));
         if corrected {
@@ -186,8 +257,10 @@ fn quadratic_gradient<const D: usize>(
     nb: &Neighbours,
     refs: &RefValues,
     i: usize,
-    frame: Option<&WallFrame<D>>,
+    frames: &Frames<D>,
+    slip_walls: &[SlipWall],
 ) -> Option<SMatrix<f64, D, D>> {
+    let frame = frames.no_slip.as_ref();
     let scale = refs.radius_n_m;
     let unknowns = D + D * (D + 1) / 2;
     let ui = p.velocity_m_s[i];
@@ -226,6 +299,16 @@ fn quadratic_gradient<const D: usize>(
         let d = r.norm();
         let w = weight(d, refs.radius_n_m);
         if w == 0.0 {
+            continue;
+        }
+        if p.kind[j] != ParticleKind::Fluid && slip_wall_of(slip_walls, j).is_some() {
+            // A slip wall enters with the velocity of its slip profile.
+            heaviest = heaviest.max(w);
+            add(
+                &r,
+                &((p.velocity_m_s[j] - ui) * frames.factor(slip_walls, j, &r)),
+                w,
+            );
             continue;
         }
         if frame.is_some() && p.kind[j] != ParticleKind::Fluid {
@@ -317,6 +400,7 @@ pub fn predict_velocity<const D: usize>(
                     i,
                     settings.gradient,
                     settings.wall_surface_m,
+                    &settings.slip_walls,
                 ))
             } else {
                 0.0
@@ -377,9 +461,15 @@ pub fn predict_velocity<const D: usize>(
         };
         let mut diag = scale;
         let mut boundary = Vector::<D>::zeros();
-        let frame = settings
-            .wall_surface_m
-            .and_then(|s| WallFrame::of(p, nb, i, refs.radius_lap_m, s));
+        let slip_walls = &settings.slip_walls;
+        let frames = Frames::of(
+            p,
+            nb,
+            i,
+            refs.radius_lap_m,
+            settings.wall_surface_m,
+            slip_walls,
+        );
         for &j in nb.of(i) {
             let j = j as usize;
             let r = nb.displacement(&p.position_m, i, j);
@@ -387,10 +477,8 @@ pub fn predict_velocity<const D: usize>(
             if a == 0.0 {
                 continue;
             }
-            if let Some(f) = &frame
-                && !is_fluid(j)
-            {
-                a *= f.factor(&r);
+            if !is_fluid(j) {
+                a *= frames.factor(slip_walls, j, &r);
             }
             let c = if divergence_form {
                 let mu_ij = if is_fluid(j) {
