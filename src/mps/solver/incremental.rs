@@ -103,11 +103,6 @@ impl<const D: usize> Solver<D> {
                 |j, r| {
                     if p.kind[j] == ParticleKind::Fluid {
                         p.pressure_pa[j] - pi
-                    } else if self.slips(j) {
-                        // A slipping body pushes but never pulls: its mirror reads a
-                        // suction above a film hanging under it (a lifted cone's overhang)
-                        // that would hold the film to the steel.
-                        (wall_base() + rho_g.dot(r)).max(0.0)
                     } else {
                         wall_base() + rho_g.dot(r)
                     }
@@ -422,14 +417,6 @@ impl<const D: usize> Solver<D> {
                 p.kind[j as usize] == kind
                     && nb.displacement(&p.position_m, i, j as usize).norm() < reach
             })
-    }
-
-    /// Whether particle j belongs to a rigid body with a slip length.
-    fn slips(&self, j: usize) -> bool {
-        self.config
-            .bodies
-            .iter()
-            .any(|b| b.slip_length_m.is_some() && (b.first..b.end).contains(&j))
     }
 
     /// Whether fluid particle i has a wall particle closer than `wall_support_m`.
