@@ -213,6 +213,56 @@ fn strokes_mix_the_layers_and_lose_nothing() {
         "{}",
         &text[..text.len().min(2000)]
     );
+    // The report draws seed 000 Fig. 5 as ours (each band's share of each layer after every
+    // stroke, and the mixing index) and tables every stroke: the rows the plot takes.
+    let report = report::page::report(
+        &result.path,
+        &report::page::ReportOptions {
+            out: Some(dir.path().join("report")),
+            keep_svg: true,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    assert!(report.skipped.is_empty(), "{:?}", report.skipped);
+    let staged: Vec<_> = report
+        .figures
+        .iter()
+        .filter(|f| {
+            f.png
+                .file_name()
+                .unwrap()
+                .to_string_lossy()
+                .starts_with("stages-")
+        })
+        .collect();
+    assert_eq!(staged.len(), 4, "{:?}", report.figures);
+    let top_band = dir
+        .path()
+        .join("report")
+        .join("stages-00-top_band__share_of_each_layer.svg");
+    let svg = std::fs::read_to_string(&top_band).unwrap();
+    for label in [
+        "from the bottom layer",
+        "from the top layer",
+        "a third (complete mix)",
+    ] {
+        assert!(svg.contains(label), "{label}");
+    }
+    let html = std::fs::read_to_string(&report.page).unwrap();
+    assert!(html.contains("<h2>By strokes done</h2>"), "no stroke table");
+    for (k, mixing) in after_strokes.iter().enumerate() {
+        let row = format!("<tr><td>{}</td>", k + 1);
+        let at = html
+            .find(&row)
+            .unwrap_or_else(|| panic!("no row for stroke {}", k + 1));
+        let cells = &html[at..at + html[at..].find("</tr>").unwrap()];
+        assert!(
+            cells.contains(&format!("<td>{mixing:.6}</td>")),
+            "stroke {}: {cells} (mixing {mixing})",
+            k + 1
+        );
+    }
     common::assert_replays(&result.path, None);
     common::assert_replays(&result.path, Some(5));
 }

@@ -10,8 +10,10 @@
 pub mod boundaries;
 pub mod geometry;
 pub mod profile;
+pub mod staged;
 
 pub use profile::{Curve, SurfaceProfile};
+pub use staged::{StagedFigure, StagedFigures};
 
 /// Summary metrics that builds before `run.math` (see [`crate::record::MATH`]) computed with
 /// the platform's `pow` (std `powf`): in files without that entry they may differ from this
@@ -98,6 +100,11 @@ pub trait Experiment {
     /// The free surface of a 3D state at `time_s` against the test's closed form (the figure
     /// and table of `runner profile` and of the report), headed by `title`; `None` for a
     /// test without one, an error naming what is missing.
+    /// The test's figures drawn once per stage (the rodding's strokes), `None` for a test
+    /// that does not go in stages.
+    fn staged_figures(&self) -> Option<StagedFigures> {
+        None
+    }
     fn surface_profile(
         &self,
         _m: &Manifest,
@@ -237,6 +244,11 @@ impl SceneSpec {
         title: &str,
     ) -> Option<Result<SurfaceProfile, String>> {
         with_experiment!(self, e => e.surface_profile(m, particles, time_s, title))
+    }
+
+    /// The test's figures drawn once per stage, if it goes in stages.
+    pub fn staged_figures(&self) -> Option<StagedFigures> {
+        with_experiment!(self, e => e.staged_figures())
     }
 }
 

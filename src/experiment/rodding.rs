@@ -6,7 +6,7 @@
 use super::geometry::container::add_walls;
 use super::geometry::lattice::{cells, centre, for_each_index};
 use super::geometry::shapes::{Shape, fill_walls};
-use super::{Experiment, Manifest, Scene};
+use super::{Experiment, Manifest, Scene, StagedFigure, StagedFigures};
 use crate::manifest::validate::{Checker, NON_NEGATIVE, POSITIVE, fmt_num};
 use crate::mps::{ParticleKind, Particles, Path, RigidBody, Vector};
 use serde::{Deserialize, Serialize};
@@ -400,6 +400,41 @@ impl Experiment for Rodding {
 
     fn trend_metric(&self) -> &'static str {
         "mixing_index"
+    }
+
+    /// Seed 000 Fig. 5 as ours: each band's share of each layer after every stroke (a
+    /// complete mix is a third each), the mixing index, and the concrete above the form's
+    /// fill (what rode up with the rod) per stroke.
+    fn staged_figures(&self) -> Option<StagedFigures> {
+        let figures = LAYERS
+            .iter()
+            .enumerate()
+            .rev()
+            .map(|(band, name)| StagedFigure {
+                title: format!("{name} band: share of each layer"),
+                y_label: "share of the band's particles",
+                curves: LAYERS
+                    .iter()
+                    .enumerate()
+                    .map(|(layer, from)| (SHARE_NAMES[band][layer], format!("from the {from} layer")))
+                    .collect(),
+                reference: Some((1.0 / 3.0, "a third (complete mix)".into())),
+            })
+            .chain(std::iter::once(StagedFigure {
+                title: "mixing index".into(),
+                y_label: "mixing index (0 layers intact, 1 complete mix)",
+                curves: vec![("mixing_index", "mixing index".into())],
+                reference: None,
+            }))
+            .collect();
+        let mut table = vec!["mixing_index", "fluid_on_rod_count"];
+        table.extend(SHARE_NAMES.iter().flatten());
+        Some(StagedFigures {
+            stage_metric: "strokes_done",
+            stage_label: "strokes done",
+            figures,
+            table,
+        })
     }
 }
 

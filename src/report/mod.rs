@@ -13,6 +13,7 @@ pub mod page;
 pub mod plot;
 pub mod png;
 pub mod profile;
+pub mod staged;
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};

@@ -166,10 +166,30 @@ fn run_report(path: &Path, options: &ReportOptions) -> Result<Report> {
         ),
     }
 
+    // A test that goes in stages: its figures against the stage, and the per-stage table.
+    let mut stage_table = None;
+    match super::staged::staged_figures(&run) {
+        Ok(None) => {}
+        Ok(Some(staged)) => {
+            for (k, figure) in staged.figures.iter().enumerate() {
+                let svg = f.svg(&format!("stages-{k:02}-{}", super::slug(&figure.title)));
+                let drawn = super::staged::draw(&run, &staged, figure, &svg);
+                let caption = format!("{} against {}", figure.title, staged.stage_label);
+                f.add(&svg, caption, drawn);
+            }
+            stage_table = Some((staged.stage_label, super::staged::table(&run, &staged)));
+        }
+        Err(e) => f.skipped.push(format!("the test's figures by stage: {e}")),
+    }
+
     let title = format!("Run report: {}", super::run_title(&run));
     let mut body = String::new();
     facts_html(&mut body, &info);
     metrics_html(&mut body, &info);
+    if let Some((label, table)) = stage_table {
+        let _ = write!(body, "<h2>By {}</h2>", esc(label));
+        table_html(&mut body, &table);
+    }
     f.finish(&title, &body)
 }
 

@@ -1,0 +1,95 @@
+//! The report's figures of a test that goes in stages (the rodding's strokes, see
+//! [`crate::experiment::StagedFigures`]): the run's diagnostics at the first row of every
+//! stage, drawn against the stage and tabled. The test names the figures; this module only
+//! reads the run and draws.
+
+use std::path::Path;
+
+use super::export::{Cell, Table};
+use super::plot::{self, Series};
+use super::{ReportError, Result, diagnostics_series_against, diagnostics_value, run_title};
+use crate::experiment::{StagedFigure, StagedFigures};
+use crate::record::RunFile;
+
+/// The run's staged figures, `None` for a test that does not go in stages.
+pub fn staged_figures(run: &RunFile) -> Result<Option<StagedFigures>> {
+    let resolved = crate::restore::manifest_of(run)
+        .map_err(|e| ReportError::Input(format!("the run's manifest: {e}")))?;
+    Ok(resolved.manifest.scene.staged_figures())
+}
+
+/// Indices of the diagnostics rows that start a stage: the first row at each value of the
+/// stage metric (the rows [`diagnostics_series_against`] takes).
+fn stage_rows(run: &RunFile, stage_metric: &str) -> Vec<usize> {
+    let mut seen: Vec<f64> = Vec::new();
+    let mut rows = Vec::new();
+    for (k, d) in run.diagnostics.iter().enumerate() {
+        if let Some(stage) = diagnostics_value(d, stage_metric)
+            && !seen.contains(&stage)
+        {
+            seen.push(stage);
+            rows.push(k);
+        }
+    }
+    rows
+}
+
+/// Draws `figure` of `staged` as an SVG at `svg`.
+pub fn draw(
+    run: &RunFile,
+    staged: &StagedFigures,
+    figure: &StagedFigure,
+    svg: &Path,
+) -> Result<()> {
+    let mut series: Vec<Series> = figure
+        .curves
+        .iter()
+        .map(|(metric, label)| Series {
+            label: label.clone(),
+            points: diagnostics_series_against(run, staged.stage_metric, metric),
+        })
+        .collect();
+    if series.iter().all(|s| s.points.is_empty()) {
+        return Err(ReportError::Input(format!(
+            "no diagnostics row holds {} and `{}`",
+            figure.title, staged.stage_metric
+        )));
+    }
+    if let Some((value, label)) = &figure.reference {
+        let stages = series.iter().flat_map(|s| s.points.iter().map(|p| p.0));
+        let (lo, hi) = stages.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| {
+            (a.min(x), b.max(x))
+        });
+        series.push(Series {
+            label: label.clone(),
+            points: vec![(lo, *value), (hi, *value)],
+        });
+    }
+    let title = format!("{}: {}", run_title(run), figure.title);
+    plot::line_plot(
+        svg,
+        &title,
+        staged.stage_label,
+        &figure.title,
+        &series,
+        true,
+    )
+}
+
+/// The per-stage table: the stage, its first row's time and the test's table metrics.
+pub fn table(run: &RunFile, staged: &StagedFigures) -> Table {
+    let rows = stage_rows(run, staged.stage_metric);
+    let mut columns = vec![staged.stage_metric.to_string(), "time_s".to_string()];
+    columns.extend(staged.table.iter().map(|m| m.to_string()));
+    let rows = rows
+        .iter()
+        .map(|&k| {
+            let d = &run.diagnostics[k];
+            columns
+                .iter()
+                .map(|c| diagnostics_value(d, c).map_or(Cell::Empty, Cell::Number))
+                .collect()
+        })
+        .collect();
+    Table { columns, rows }
+}
