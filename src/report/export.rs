@@ -120,9 +120,16 @@ pub fn diagnostics_table(run: &RunFile) -> Table {
         .map(|s| s.to_string())
         .chain(metrics.into_iter().cloned())
         .collect();
-    let rows = run
-        .diagnostics
-        .iter()
+    rows_table(columns, run.diagnostics.iter())
+}
+
+/// The table of the diagnostics `rows` with `columns` (built-in fields or metrics; a value a
+/// row does not have is empty).
+pub fn rows_table<'a>(
+    columns: Vec<String>,
+    rows: impl Iterator<Item = &'a crate::proto::mps::v1::Diagnostics>,
+) -> Table {
+    let rows = rows
         .map(|d| {
             columns
                 .iter()

@@ -5,7 +5,7 @@
 
 use std::path::Path;
 
-use super::export::{Cell, Table};
+use super::export::{Table, rows_table};
 use super::plot::{self, Series};
 use super::{ReportError, Result, diagnostics_series_against, diagnostics_value, run_title};
 use crate::experiment::{StagedFigure, StagedFigures};
@@ -81,15 +81,5 @@ pub fn table(run: &RunFile, staged: &StagedFigures) -> Table {
     let rows = stage_rows(run, staged.stage_metric);
     let mut columns = vec![staged.stage_metric.to_string(), "time_s".to_string()];
     columns.extend(staged.table.iter().map(|m| m.to_string()));
-    let rows = rows
-        .iter()
-        .map(|&k| {
-            let d = &run.diagnostics[k];
-            columns
-                .iter()
-                .map(|c| diagnostics_value(d, c).map_or(Cell::Empty, Cell::Number))
-                .collect()
-        })
-        .collect();
-    Table { columns, rows }
+    rows_table(columns, rows.iter().map(|&k| &run.diagnostics[k]))
 }
