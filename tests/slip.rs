@@ -180,6 +180,9 @@ fn a_free_slipping_rod_comes_out_of_the_concrete_clean() {
         all.extend_from_slice(sets);
         let resolved = common::resolve("rodding_2d.yaml", &all);
         let result = common::run_completed(&resolved, dir.path(), 2);
+        // Run on 2 threads, replayed on 1: the same bits (the slip walls' frames and
+        // factors are per particle, in a fixed order).
+        common::assert_replays(&result.path, None);
         let run = mps_runner::record::read_run(&result.path).unwrap();
         let row = run
             .diagnostics
