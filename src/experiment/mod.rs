@@ -97,14 +97,14 @@ pub trait Experiment {
     fn flow_measures(&self) -> &'static [&'static str] {
         &[]
     }
-    /// The free surface of a 3D state at `time_s` against the test's closed form (the figure
-    /// and table of `runner profile` and of the report), headed by `title`; `None` for a
-    /// test without one, an error naming what is missing.
     /// The test's figures drawn once per stage (the rodding's strokes), `None` for a test
     /// that does not go in stages.
     fn staged_figures(&self) -> Option<StagedFigures> {
         None
     }
+    /// The free surface of a 3D state at `time_s` against the test's closed form (the figure
+    /// and table of `runner profile` and of the report), headed by `title`; `None` for a
+    /// test without one, an error naming what is missing.
     fn surface_profile(
         &self,
         _m: &Manifest,

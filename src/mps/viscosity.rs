@@ -71,7 +71,7 @@ impl<const D: usize> Frames<D> {
         wall_surface_m: Option<f64>,
         slip_walls: &[SlipWall],
     ) -> Self {
-        let plain = |j: usize| slip_walls.is_empty() || slip_wall_of(slip_walls, j).is_none();
+        let plain = |j: usize| slip_wall_of(slip_walls, j).is_none();
         let no_slip = wall_surface_m.and_then(|s| WallFrame::of(p, nb, i, radius_m, s, plain));
         let slip = slip_walls.first().and_then(|w| {
             WallFrame::of(p, nb, i, radius_m, w.surface_m, |j| {

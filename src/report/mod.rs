@@ -179,15 +179,29 @@ pub fn diagnostics_series_against(run: &RunFile, x: &str, name: &str) -> Vec<(f6
     if x == "time_s" {
         return diagnostics_series(run, name);
     }
-    let mut points: Vec<(f64, f64)> = Vec::new();
-    for d in &run.diagnostics {
-        if let (Some(xv), Some(v)) = (diagnostics_value(d, x), diagnostics_value(d, name))
-            && !points.iter().any(|p| p.0 == xv)
+    first_rows_at(run, x, name)
+        .into_iter()
+        .filter_map(|k| {
+            let d = &run.diagnostics[k];
+            Some((diagnostics_value(d, x)?, diagnostics_value(d, name)?))
+        })
+        .collect()
+}
+
+/// Indices of the diagnostics rows that hold both `x` and `name`, the first such row at each
+/// value `x` takes (for a counter: the row just after each count is reached).
+pub fn first_rows_at(run: &RunFile, x: &str, name: &str) -> Vec<usize> {
+    let mut seen: Vec<f64> = Vec::new();
+    let mut rows = Vec::new();
+    for (k, d) in run.diagnostics.iter().enumerate() {
+        if let (Some(xv), Some(_)) = (diagnostics_value(d, x), diagnostics_value(d, name))
+            && !seen.contains(&xv)
         {
-            points.push((xv, v));
+            seen.push(xv);
+            rows.push(k);
         }
     }
-    points
+    rows
 }
 
 /// `runner plot`: diagnostics quantities `metrics` (default [`default_metric`]), one line

@@ -7,7 +7,7 @@ use std::path::Path;
 
 use super::export::{Table, rows_table};
 use super::plot::{self, Series};
-use super::{ReportError, Result, diagnostics_series_against, diagnostics_value, run_title};
+use super::{ReportError, Result, diagnostics_series_against, first_rows_at, run_title};
 use crate::experiment::{StagedFigure, StagedFigures};
 use crate::record::RunFile;
 
@@ -16,22 +16,6 @@ pub fn staged_figures(run: &RunFile) -> Result<Option<StagedFigures>> {
     let resolved = crate::restore::manifest_of(run)
         .map_err(|e| ReportError::Input(format!("the run's manifest: {e}")))?;
     Ok(resolved.manifest.scene.staged_figures())
-}
-
-/// Indices of the diagnostics rows that start a stage: the first row at each value of the
-/// stage metric (the rows [`diagnostics_series_against`] takes).
-fn stage_rows(run: &RunFile, stage_metric: &str) -> Vec<usize> {
-    let mut seen: Vec<f64> = Vec::new();
-    let mut rows = Vec::new();
-    for (k, d) in run.diagnostics.iter().enumerate() {
-        if let Some(stage) = diagnostics_value(d, stage_metric)
-            && !seen.contains(&stage)
-        {
-            seen.push(stage);
-            rows.push(k);
-        }
-    }
-    rows
 }
 
 /// Draws `figure` of `staged` as an SVG at `svg`.
@@ -70,7 +54,7 @@ pub fn draw(
         svg,
         &title,
         staged.stage_label,
-        &figure.title,
+        figure.y_label,
         &series,
         true,
     )
@@ -78,7 +62,8 @@ pub fn draw(
 
 /// The per-stage table: the stage, its first row's time and the test's table metrics.
 pub fn table(run: &RunFile, staged: &StagedFigures) -> Table {
-    let rows = stage_rows(run, staged.stage_metric);
+    // The rows that start a stage: those the figures take.
+    let rows = first_rows_at(run, staged.stage_metric, staged.stage_metric);
     let mut columns = vec![staged.stage_metric.to_string(), "time_s".to_string()];
     columns.extend(staged.table.iter().map(|m| m.to_string()));
     rows_table(columns, rows.iter().map(|&k| &run.diagnostics[k]))
