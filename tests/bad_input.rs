@@ -78,6 +78,10 @@ const CASES: &[(&[&str], &str)] = &[
     (&["--set", "mps.ppe_tolerance=1"], "mps.ppe_tolerance"),
     (&["--set", "mps.ppe_preconditioner=magic"], "magic"),
     (
+        &["--set", "mps.multigrid_over_correction=2"],
+        "mps.multigrid_over_correction",
+    ),
+    (
         &["--set", "stop.max_steps=0"],
         "stop.max_steps: must be >= 1",
     ),

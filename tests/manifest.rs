@@ -245,11 +245,12 @@ fn example_files_parse() {
     assert_eq!(m.output.cloud_interval_s, 0.02);
     assert_eq!(m.output.diagnostics_interval_s, 0.005);
     // Its values are FULL's (defaults written out), except for the name and the multigrid
-    // preconditioner (the default stays Jacobi, which earlier files used).
+    // preconditioner with its over-correction (the default stays Jacobi, which earlier files
+    // used).
     let full = ok(&edit(
         &edit(FULL, "name: full_example", "name: dam_break_2d"),
         "  ppe_tolerance:",
-        "  ppe_preconditioner: multigrid\n  ppe_tolerance:",
+        "  ppe_preconditioner: multigrid\n  multigrid_over_correction: 1.5\n  ppe_tolerance:",
     ));
     assert_eq!(d.manifest, full.manifest);
     assert_eq!(d.hash_hex, full.hash_hex);
@@ -308,6 +309,28 @@ fn hash_ignores_presentation_and_defaults() {
     // An override that sets the value already there changes nothing either.
     assert_eq!(ok_with(MINIMAL, &["time.courant=0.2"]).hash_hex, base);
     assert_eq!(ok_with(MINIMAL, &["fluid.model=newtonian"]).hash_hex, base);
+    // The multigrid over-correction at plain aggregation (1), or under Jacobi, which never
+    // reads it, is the experiment before the field existed; under multigrid it is part of it.
+    assert_eq!(
+        ok_with(MINIMAL, &["mps.multigrid_over_correction=1"]).hash_hex,
+        base
+    );
+    assert_eq!(
+        ok_with(MINIMAL, &["mps.multigrid_over_correction=1.5"]).hash_hex,
+        base
+    );
+    let multigrid = ok_with(MINIMAL, &["mps.ppe_preconditioner=multigrid"]).hash_hex;
+    assert_ne!(
+        ok_with(
+            MINIMAL,
+            &[
+                "mps.ppe_preconditioner=multigrid",
+                "mps.multigrid_over_correction=1.5"
+            ]
+        )
+        .hash_hex,
+        multigrid
+    );
 }
 
 #[test]

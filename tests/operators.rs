@@ -292,7 +292,7 @@ fn multigrid_preconditioner_cuts_iterations_and_keeps_bits_across_threads() {
             .build()
             .unwrap();
         pool.install(|| {
-            let mg = Multigrid::new(&a, &cells);
+            let mg = Multigrid::new(&a, &cells, 1.0);
             let pc = if multigrid {
                 Preconditioner::Multigrid(&mg)
             } else {
@@ -352,4 +352,43 @@ fn inactive_particles_are_nobodys_neighbours_and_others_need_no_list() {
     assert!(nb.of(ghost).is_empty() && nb.of(dummy).is_empty());
     assert!(nb.of(46).contains(&(dummy as u32)));
     assert!(!nb.of(43).is_empty());
+}
+
+#[test]
+fn multigrid_over_correction_cuts_iterations_and_their_growth_with_size() {
+    // Plain aggregation's piecewise-constant prolongation under-shoots smooth errors: its
+    // iteration count grows with the grid. Scaling each coarse correction by 1.5 makes up for
+    // most of it (docs/performance.md, "Multigrid over-correction"). 5-point Poisson, m x m.
+    let iterations = |m: usize, over_correction: f64| {
+        let a = poisson(m);
+        let n = m * m;
+        let cells: Vec<[i64; 3]> = (0..n)
+            .map(|i| [(i % m) as i64, (i / m) as i64, 0])
+            .collect();
+        let x_true: Vec<f64> = (0..n)
+            .map(|i| ((i * 37 % 101) as f64 / 101.0) - 0.3)
+            .collect();
+        let b: Vec<[f64; 1]> = product(&a, &x_true).into_iter().map(|v| [v]).collect();
+        let mg = Multigrid::new(&a, &cells, over_correction);
+        let mut x = vec![[0.0]; n];
+        let [report] = solve_pcg_many(&a, &b, &mut x, 1e-10, 10_000, Preconditioner::Multigrid(&mg));
+        assert!(report.converged, "{report:?}");
+        // The over-corrected cycle is still a symmetric positive definite preconditioner:
+        // plain CG reaches the true solution.
+        let err = x
+            .iter()
+            .zip(&x_true)
+            .map(|(p, q)| (p[0] - q).abs())
+            .fold(0.0, f64::max);
+        assert!(err < 1e-6, "max error {err}");
+        report.iterations
+    };
+    let (plain_small, plain_large) = (iterations(32, 1.0), iterations(256, 1.0));
+    let (over_small, over_large) = (iterations(32, 1.5), iterations(256, 1.5));
+    eprintln!("plain {plain_small} -> {plain_large}, over-corrected {over_small} -> {over_large}");
+    assert!(over_large < plain_large, "{over_large} vs {plain_large}");
+    assert!(
+        over_large - over_small < plain_large - plain_small,
+        "growth {over_small}->{over_large} vs {plain_small}->{plain_large}"
+    );
 }

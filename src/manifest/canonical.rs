@@ -5,7 +5,8 @@
 //! off, which a test checks), `f64` fields always written as floats in serde_json's shortest
 //! round-trip form, `-0.0` written as `0.0`, integers as integers. Settings added after the
 //! format was first used are left out while they are at their original behaviour
-//! (`mps.ppe_preconditioner: jacobi`, `mps.pressure_scheme: standard` with
+//! (`mps.ppe_preconditioner: jacobi`, `mps.multigrid_over_correction` at 1 or under Jacobi,
+//! `mps.pressure_scheme: standard` with
 //! `mps.compression_relaxation`, `mps.pair_stabilisation`, `mps.wall_support` and
 //! `mps.pressure_regularisation` (with `mps.regularisation_radius`) and `mps.surface_depth`
 //! at 0 (and under the standard scheme), `mps.corrected_strain_rate`,
@@ -42,6 +43,13 @@ pub fn canonical_text<S: SceneSection>(manifest: &Manifest<S>) -> String {
         && let Some(mps) = value.get_mut("mps").and_then(Value::as_object_mut)
     {
         mps.remove("ppe_preconditioner");
+    }
+    // Plain aggregation (1), or a factor Jacobi never reads: the behaviour before the field.
+    if (manifest.mps.multigrid_over_correction == 1.0
+        || manifest.mps.ppe_preconditioner == PpePreconditioner::Jacobi)
+        && let Some(mps) = value.get_mut("mps").and_then(Value::as_object_mut)
+    {
+        mps.remove("multigrid_over_correction");
     }
     if manifest.mps.pressure_scheme == PressureSchemeName::Standard
         && let Some(mps) = value.get_mut("mps").and_then(Value::as_object_mut)

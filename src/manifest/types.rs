@@ -290,6 +290,12 @@ pub struct Mps {
     /// a few times fewer iterations; same solution to `ppe_tolerance`, other bits).
     #[serde(default)]
     pub ppe_preconditioner: PpePreconditioner,
+    /// Multigrid only, in (0, 2): the factor on each coarse-grid correction of the cycle
+    /// (1 = plain aggregation, the behaviour before the field existed). Above 1 it makes up
+    /// for the piecewise-constant prolongation's under-shoot: fewer iterations, and a count
+    /// that grows less with the size (docs/performance.md, "Multigrid over-correction").
+    #[serde(default = "default_multigrid_over_correction")]
+    pub multigrid_over_correction: f64,
     /// Relative residual tolerance of the PPE conjugate-gradient solver.
     #[serde(default = "default_ppe_tolerance")]
     pub ppe_tolerance: f64,
@@ -330,6 +336,7 @@ impl Default for Mps {
             quadratic_strain_rate: false,
             exact_projection: false,
             ppe_preconditioner: PpePreconditioner::default(),
+            multigrid_over_correction: default_multigrid_over_correction(),
             compressibility_1_pa: default_compressibility_1_pa(),
             collision_distance: default_collision_distance(),
             collision_restitution: default_collision_restitution(),
@@ -418,6 +425,9 @@ fn default_collision_restitution() -> f64 {
 /// error; the viscous solve keeps 1e-9 (a creeping Bingham heap feels its error).
 fn default_ppe_tolerance() -> f64 {
     1.0e-6
+}
+fn default_multigrid_over_correction() -> f64 {
+    1.0
 }
 fn default_ppe_max_iterations() -> u32 {
     2000

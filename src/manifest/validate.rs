@@ -196,6 +196,11 @@ pub fn check<S: SceneSection>(m: &Manifest<S>) -> Vec<Issue> {
         between(1.0, false, 2.0, false),
     );
     c.real(
+        "mps.multigrid_over_correction",
+        p.multigrid_over_correction,
+        between(0.0, false, 2.0, false),
+    );
+    c.real(
         "mps.surface_depth",
         p.surface_depth,
         between(0.0, true, 1.0, true),

@@ -84,6 +84,8 @@ pub struct SolverConfig<const D: usize> {
     pub exact_projection: bool,
     /// Aggregation multigrid instead of Jacobi as the PPE preconditioner.
     pub multigrid_ppe: bool,
+    /// Factor on the multigrid cycle's coarse-grid corrections (1: plain aggregation).
+    pub multigrid_over_correction: f64,
     pub compressibility_1_pa: f64,
     pub collision_distance_m: f64,
     /// Collision distance between a fluid and a wall particle (see

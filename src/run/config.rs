@@ -58,6 +58,7 @@ pub fn solver_config<const D: usize>(m: &Manifest, scene: &Scene<D>) -> SolverCo
         surface_threshold: m.mps.surface_threshold,
         relaxation_coefficient: m.mps.relaxation_coefficient,
         multigrid_ppe: m.mps.ppe_preconditioner == PpePreconditioner::Multigrid,
+        multigrid_over_correction: m.mps.multigrid_over_correction,
         source_term: match m.mps.source_term {
             PpeSource::NumberDensity => SourceTerm::NumberDensity,
             PpeSource::Mixed => SourceTerm::Mixed,

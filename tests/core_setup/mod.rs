@@ -54,6 +54,7 @@ pub fn config<const D: usize>(
         relaxation_coefficient: 0.2,
         source_term: SourceTerm::Mixed,
         multigrid_ppe: false,
+        multigrid_over_correction: 1.0,
         pressure_scheme: mps_runner::mps::PressureScheme::Standard,
         compression_relaxation: 0.01,
         pair_stabilisation_m: 0.0,

@@ -233,7 +233,7 @@ impl<const D: usize> Solver<D> {
                     std::array::from_fn(|a| if a < D { (x[a] / l0).floor() as i64 } else { 0 })
                 })
                 .collect();
-            Multigrid::new(matrix, &cells)
+            Multigrid::new(matrix, &cells, c.multigrid_over_correction)
         });
         solve_pcg(
             matrix,
