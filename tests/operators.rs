@@ -226,6 +226,21 @@ fn pcg_meets_its_residual_tolerance() {
     assert!(!capped.converged && capped.iterations == 5);
 }
 
+/// The m x m Poisson matrix, its rows' lattice cells, a known solution and its right-hand
+/// side.
+fn poisson_problem(m: usize) -> (CsrMatrix, Vec<[i64; 3]>, Vec<f64>, Vec<[f64; 1]>) {
+    let a = poisson(m);
+    let n = m * m;
+    let cells: Vec<[i64; 3]> = (0..n)
+        .map(|i| [(i % m) as i64, (i / m) as i64, 0])
+        .collect();
+    let x_true: Vec<f64> = (0..n)
+        .map(|i| ((i * 37 % 101) as f64 / 101.0) - 0.3)
+        .collect();
+    let b: Vec<[f64; 1]> = product(&a, &x_true).into_iter().map(|v| [v]).collect();
+    (a, cells, x_true, b)
+}
+
 fn product(a: &CsrMatrix, x: &[f64]) -> Vec<f64> {
     let x: Vec<[f64; 1]> = x.iter().map(|&v| [v]).collect();
     let mut y = vec![[0.0]; x.len()];
@@ -276,15 +291,8 @@ fn multigrid_preconditioner_cuts_iterations_and_keeps_bits_across_threads() {
     // 5-point Poisson on a 100 x 100 grid: Jacobi-PCG needs O(m) iterations, the aggregation
     // multigrid cycle a number nearly independent of m.
     let m = 100;
-    let a = poisson(m);
+    let (a, cells, _, b) = poisson_problem(m);
     let n = m * m;
-    let cells: Vec<[i64; 3]> = (0..n)
-        .map(|i| [(i % m) as i64, (i / m) as i64, 0])
-        .collect();
-    let x_true: Vec<f64> = (0..n)
-        .map(|i| ((i * 37 % 101) as f64 / 101.0) - 0.3)
-        .collect();
-    let b: Vec<[f64; 1]> = product(&a, &x_true).into_iter().map(|v| [v]).collect();
     let tol = 1e-10;
     let solve = |threads: usize, multigrid: bool| {
         let pool = rayon::ThreadPoolBuilder::new()
@@ -360,17 +368,9 @@ fn multigrid_over_correction_cuts_iterations_and_their_growth_with_size() {
     // iteration count grows with the grid. Scaling each coarse correction by 1.5 makes up for
     // most of it (docs/performance.md, "Multigrid over-correction"). 5-point Poisson, m x m.
     let iterations = |m: usize, over_correction: f64| {
-        let a = poisson(m);
-        let n = m * m;
-        let cells: Vec<[i64; 3]> = (0..n)
-            .map(|i| [(i % m) as i64, (i / m) as i64, 0])
-            .collect();
-        let x_true: Vec<f64> = (0..n)
-            .map(|i| ((i * 37 % 101) as f64 / 101.0) - 0.3)
-            .collect();
-        let b: Vec<[f64; 1]> = product(&a, &x_true).into_iter().map(|v| [v]).collect();
+        let (a, cells, x_true, b) = poisson_problem(m);
         let mg = Multigrid::new(&a, &cells, over_correction);
-        let mut x = vec![[0.0]; n];
+        let mut x = vec![[0.0]; m * m];
         let [report] = solve_pcg_many(&a, &b, &mut x, 1e-10, 10_000, Preconditioner::Multigrid(&mg));
         assert!(report.converged, "{report:?}");
         // The over-corrected cycle is still a symmetric positive definite preconditioner:
