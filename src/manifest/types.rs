@@ -421,8 +421,9 @@ fn default_collision_restitution() -> f64 {
     0.2
 }
 /// From the error budget in docs/performance.md ("Solver tolerances"): at 1e-6 the seeds'
-/// metrics and closed-form comparisons move by less than a thousandth of their spacing's
-/// error; the viscous solve keeps 1e-9 (a creeping Bingham heap feels its error).
+/// metrics and closed-form comparisons move by about their round-off floor or less, and by
+/// at most a twentieth of the spacing's error; the viscous solve keeps 1e-9 (a creeping
+/// Bingham heap feels its error).
 fn default_ppe_tolerance() -> f64 {
     1.0e-6
 }

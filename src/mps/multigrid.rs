@@ -57,8 +57,8 @@ impl Multigrid {
     /// Builds the hierarchy of `fine` whose row i sits in the lattice cell `cells[i]` (integer
     /// coordinates in spacings; unused axes 0). `over_correction` in (0, 2) scales each
     /// coarse-grid correction: the piecewise-constant prolongation of plain aggregation
-    /// under-shoots smooth errors, and a factor above 1 makes up for it (Vaněk's
-    /// over-correction; Blaheta 1986). The cycle stays a fixed symmetric operator.
+    /// under-shoots smooth errors, and a factor above 1 makes up for it (over-correction, a
+    /// known remedy for plain aggregation). The cycle stays a fixed symmetric operator.
     pub fn new(fine: &CsrMatrix, cells: &[[i64; 3]], over_correction: f64) -> Self {
         assert_eq!(cells.len(), fine.rows());
         let fine_inv_diagonal = inverse(&fine.diagonal);
