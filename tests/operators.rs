@@ -371,7 +371,14 @@ fn multigrid_over_correction_cuts_iterations_and_their_growth_with_size() {
         let (a, cells, x_true, b) = poisson_problem(m);
         let mg = Multigrid::new(&a, &cells, over_correction);
         let mut x = vec![[0.0]; m * m];
-        let [report] = solve_pcg_many(&a, &b, &mut x, 1e-10, 10_000, Preconditioner::Multigrid(&mg));
+        let [report] = solve_pcg_many(
+            &a,
+            &b,
+            &mut x,
+            1e-10,
+            10_000,
+            Preconditioner::Multigrid(&mg),
+        );
         assert!(report.converged, "{report:?}");
         // The over-corrected cycle is still a symmetric positive definite preconditioner:
         // plain CG reaches the true solution.

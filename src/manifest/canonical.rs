@@ -14,8 +14,9 @@
 //! under the standard scheme) false, `stop.rest_*` without `stop.rest_metric`, null
 //! `mps.wall_collision_*`, `time.dt_min_s`, `stop.max_ghost_particles` and the rod's, the
 //! cone's and the bodies' slip lengths, an empty `boundaries` section), so every experiment
-//! keeps the hash it had before they existed and files written then still verify. JSON is YAML, so the canonical text loads back through
-//! [`super::from_str`] to the same manifest and hash.
+//! keeps the hash it had before they existed and files written then still verify. JSON is
+//! YAML, so the canonical text loads back through [`super::from_str`] to the same manifest
+//! and hash.
 
 use serde_json::Value;
 use sha2::{Digest, Sha256};
