@@ -734,10 +734,13 @@ fn invalid_values_are_named_and_located() {
             "mps.wall_surface_no_slip=false",
             "mps.quadratic_strain_rate=false",
             "mps.exact_projection=false",
+            "mps.particle_shifting=0",
+            "mps.particle_shifting_limit=0.2",
         ],
     );
     assert_eq!(plain.hash_hex, off.hash_hex);
     for on in [
+        "mps.particle_shifting=40",
         "mps.surface_depth=0.5",
         "mps.corrected_strain_rate=true",
         "mps.wall_surface_no_slip=true",
@@ -749,6 +752,27 @@ fn invalid_values_are_named_and_located() {
     }
     let e = err_with(MINIMAL, &["mps.surface_depth=1.5"]);
     assert_invalid(&e, "mps.surface_depth", None, &["[0, 1]", "1.5"]);
+    // The shifting's limit is part of the experiment once shifting is on.
+    let shifted = ok_with(
+        MINIMAL,
+        &[
+            "mps.pressure_scheme=incremental",
+            "mps.particle_shifting=40",
+        ],
+    );
+    let limited = ok_with(
+        MINIMAL,
+        &[
+            "mps.pressure_scheme=incremental",
+            "mps.particle_shifting=40",
+            "mps.particle_shifting_limit=0.1",
+        ],
+    );
+    assert_ne!(shifted.hash_hex, limited.hash_hex);
+    let e = err_with(MINIMAL, &["mps.particle_shifting=-1"]);
+    assert_invalid(&e, "mps.particle_shifting", None, &["[0, 1000]", "-1"]);
+    let e = err_with(MINIMAL, &["mps.particle_shifting_limit=0"]);
+    assert_invalid(&e, "mps.particle_shifting_limit", None, &["(0, 0.5]", "0"]);
     // Two estimates of the strain rate: one at a time.
     let e = err_with(
         MINIMAL,

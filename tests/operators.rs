@@ -226,9 +226,12 @@ fn pcg_meets_its_residual_tolerance() {
     assert!(!capped.converged && capped.iterations == 5);
 }
 
-/// The m x m Poisson matrix, its rows' lattice cells, a known solution and its right-hand
-/// side.
-fn poisson_problem(m: usize) -> (CsrMatrix, Vec<[i64; 3]>, Vec<f64>, Vec<[f64; 1]>) {
+/// A Poisson test problem: the matrix, its rows' lattice cells, a known solution and its
+/// right-hand side.
+type PoissonProblem = (CsrMatrix, Vec<[i64; 3]>, Vec<f64>, Vec<[f64; 1]>);
+
+/// The m x m Poisson matrix with its cells, a known solution and its right-hand side.
+fn poisson_problem(m: usize) -> PoissonProblem {
     let a = poisson(m);
     let n = m * m;
     let cells: Vec<[i64; 3]> = (0..n)

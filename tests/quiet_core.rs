@@ -207,6 +207,30 @@ fn stabilisers_are_idle_at_rest() {
     );
 }
 
+/// Particle shifting (`mps.particle_shifting`) scales with the shear rate, which noise keeps
+/// above zero in a tank at rest: it must not turn that noise into motion. Under the 2D set at
+/// 20 mm over 2 s, MEASURED 2.4e-4 m/s. When surface particles are shifted by their whole
+/// kernel sum (the truncated stencil's rows below read as a crowd) the top row drifts along
+/// the surface: 4.1e-3 m/s here (0.017 m/s in the 10 mm tank by 5 s), and the bound fails.
+#[test]
+fn particle_shifting_leaves_a_still_tank_still() {
+    let (speed, bottom_error) = still_tank_configured::<2>([30, 14], 10, 2.0, 0.0, |cfg, l0| {
+        // The 2D set of the quiet scheme (docs/validation.md, "Holding still").
+        cfg.pressure_scheme = PressureScheme::Incremental;
+        cfg.pair_stabilisation_m = 0.8 * l0;
+        cfg.wall_support_m = 0.95 * l0;
+        cfg.pressure_regularisation = 1.0;
+        cfg.regularisation_radius_m = 1.5 * l0;
+        cfg.particle_shifting = 40.0;
+        cfg.particle_shifting_limit_m = 0.05 * l0;
+    });
+    assert!(speed < 1e-3, "max speed {speed:.3e} m/s");
+    assert!(
+        bottom_error.abs() < 0.005,
+        "bottom pressure error {bottom_error:.4}"
+    );
+}
+
 /// A column of still water 6 particles wide and 60 deep (10 mm) in a walled box under the
 /// stabilised incremental scheme, with pressure regularisation `beta`: the largest fluid
 /// speed over [0.5, 1.5] s, or infinity when the run fails (a particle too fast).

@@ -8,8 +8,9 @@
 //! (`mps.ppe_preconditioner: jacobi`, `mps.multigrid_over_correction` at 1 or under Jacobi,
 //! `mps.pressure_scheme: standard` with
 //! `mps.compression_relaxation`, `mps.pair_stabilisation`, `mps.wall_support` and
-//! `mps.pressure_regularisation` (with `mps.regularisation_radius`) and `mps.surface_depth`
-//! at 0 (and under the standard scheme), `mps.corrected_strain_rate`,
+//! `mps.pressure_regularisation` (with `mps.regularisation_radius`), `mps.surface_depth` and
+//! `mps.particle_shifting` (with `mps.particle_shifting_limit`) at 0 (and under the standard
+//! scheme), `mps.corrected_strain_rate`,
 //! `mps.wall_surface_no_slip`, `mps.quadratic_strain_rate` and `mps.exact_projection` (also
 //! under the standard scheme) false, `stop.rest_*` without `stop.rest_metric`, null
 //! `mps.wall_collision_*`, `time.dt_min_s`, `stop.max_ghost_particles` and the rod's, the
@@ -70,14 +71,18 @@ pub fn canonical_text<S: SceneSection>(manifest: &Manifest<S>) -> String {
                 manifest.mps.pressure_regularisation,
             ),
             ("surface_depth", manifest.mps.surface_depth),
+            ("particle_shifting", manifest.mps.particle_shifting),
         ] {
             if v == 0.0 || manifest.mps.pressure_scheme == PressureSchemeName::Standard {
                 mps.remove(key);
             }
         }
-        // The radius is read only with the regularisation on.
+        // The radius is read only with the regularisation on, the limit only with shifting.
         if !mps.contains_key("pressure_regularisation") {
             mps.remove("regularisation_radius");
+        }
+        if !mps.contains_key("particle_shifting") {
+            mps.remove("particle_shifting_limit");
         }
         // The switches: off (false) is the behaviour before they existed; the exact projection
         // is read by the incremental scheme only.

@@ -242,6 +242,19 @@ pub struct Mps {
     /// Unused by `standard`.
     #[serde(default)]
     pub surface_depth: f64,
+    /// Incremental scheme, dimensionless A of the particle shifting (Fickian, Lind et al.
+    /// 2012, with a diffusion coefficient A l0^2 sqrt(Pi) that follows the local shear rate):
+    /// after the correction each fluid particle is shifted by
+    /// -A l0^2 sqrt(Pi) dt (d/n0) sum_j r_ij w(r_ij)/r_ij^2, away from its closest
+    /// neighbours; where its stencil is incomplete (n < n0: at and under the free surface)
+    /// only along the surface, so that the fluid keeps its volume. Idle at rest, under a
+    /// uniform motion and in unyielded material. 0 = off. In [0, 1000]. Unused by `standard`.
+    #[serde(default)]
+    pub particle_shifting: f64,
+    /// Largest shift per step, units of spacing, in (0, 0.5]. Read only with
+    /// `particle_shifting` on.
+    #[serde(default = "default_particle_shifting_limit")]
+    pub particle_shifting_limit: f64,
     /// The velocity gradient of the strain rate with the corrective matrix (first-order
     /// consistent, as the incremental scheme's pressure gradient) instead of the plain MPS
     /// gradient model, which is short by up to half near the free surface and walls.
@@ -331,6 +344,8 @@ impl Default for Mps {
             pressure_regularisation: 0.0,
             regularisation_radius: default_regularisation_radius(),
             surface_depth: 0.0,
+            particle_shifting: 0.0,
+            particle_shifting_limit: default_particle_shifting_limit(),
             corrected_strain_rate: false,
             wall_surface_no_slip: false,
             quadratic_strain_rate: false,
@@ -393,6 +408,10 @@ impl PressureSchemeName {
 
 fn default_regularisation_radius() -> f64 {
     1.5
+}
+
+fn default_particle_shifting_limit() -> f64 {
+    0.05
 }
 
 fn default_compression_relaxation() -> f64 {

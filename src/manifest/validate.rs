@@ -205,6 +205,16 @@ pub fn check<S: SceneSection>(m: &Manifest<S>) -> Vec<Issue> {
         p.surface_depth,
         between(0.0, true, 1.0, true),
     );
+    c.real(
+        "mps.particle_shifting",
+        p.particle_shifting,
+        between(0.0, true, 1000.0, true),
+    );
+    c.real(
+        "mps.particle_shifting_limit",
+        p.particle_shifting_limit,
+        between(0.0, false, 0.5, true),
+    );
     // Measured unstable in 3D (docs/validation.md "Holding still"): a 3D tank at rest that holds
     // still without it grows to 0.1 m/s within 1.5 s with it.
     if m.dimension == 3 && p.pressure_regularisation > 0.0 {

@@ -6,8 +6,9 @@
 //! `incremental.rs`); (5) implicit viscosity and gravity give u* (`mps/viscosity.rs`);
 //! (6) r* = r + dt u*; (7) neighbours again and collisions (`contact.rs`); (8) the projection:
 //! pressure and the correction of velocity and position (`standard.rs`, or `incremental.rs`
-//! and `exact.rs`); (9) pair stabilisation and (10) a second fluid-wall collision pass
-//! (`contact.rs`); (11) the clock advances and the state is checked (`state.rs`).
+//! and `exact.rs`); (9) pair stabilisation, particle shifting and (10) a second fluid-wall
+//! collision pass (`contact.rs`); (11) the clock advances and the state is checked
+//! (`state.rs`).
 use super::body::RigidBody;
 use super::grid::{KernelPairs, Neighbours};
 use super::inlet::Inlet;
@@ -73,6 +74,12 @@ pub struct SolverConfig<const D: usize> {
     /// Incremental scheme: a free-surface particle holds rho |g| surface_depth_m
     /// max(-n . g/|g|, 0) (0 = p = 0 at surface particles).
     pub surface_depth_m: f64,
+    /// Incremental scheme: A of the particle shifting dr = -A l0^2 sqrt(Pi) dt (d/n0)
+    /// sum_j r_ij w(r_ij)/r_ij^2, kept to the tangent plane where a particle's stencil is
+    /// incomplete (0 = off). Idle at rest and in rigid motion (Pi = 0).
+    pub particle_shifting: f64,
+    /// Largest shift per step (m).
+    pub particle_shifting_limit_m: f64,
     /// How the strain rate's velocity gradient is estimated.
     pub strain_rate_gradient: StrainRateGradient,
     /// No-slip at the walls' surface, not at the wall particles (see
@@ -481,9 +488,12 @@ impl<const D: usize> Solver<D> {
         } else {
             self.standard_projection(dt_s, start_density.as_deref())?
         };
-        // (9) Pair stabilisation, (10) fluid-wall collisions once more.
+        // (9) Pair stabilisation and particle shifting, (10) fluid-wall collisions once more.
         if incremental && self.config.pair_stabilisation_m > 0.0 {
             self.stabilise_pairs(dt_s, self.config.pair_stabilisation_m);
+        }
+        if incremental && self.config.particle_shifting > 0.0 {
+            self.shift_particles(dt_s);
         }
         if self.config.wall_collision_second_pass {
             // The correction can push a free-surface particle into a gap of the wall lattice

@@ -209,6 +209,8 @@ pub fn run_info(path: &Path, size_bytes: u64, run: &RunFile) -> RunInfo {
                 "pressure_regularisation",
                 "regularisation_radius",
                 "surface_depth",
+                "particle_shifting",
+                "particle_shifting_limit",
                 "corrected_strain_rate",
                 "wall_surface_no_slip",
                 "quadratic_strain_rate",

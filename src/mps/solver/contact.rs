@@ -1,13 +1,88 @@
 //! (7) and (10) Collisions of particles closer than the collision distance, and (9) the pair
-//! stabilisation of the incremental scheme.
+//! stabilisation and particle shifting of the incremental scheme.
 
 use super::{Solver, per_particle};
 use crate::mps::grid::Neighbours;
+use crate::mps::kernel::weight;
+use crate::mps::operators::difference_sum;
 use crate::mps::particles::{ParticleKind, Vector};
 use crate::mps::reduce::PARTICLES_PER_TASK;
+use crate::mps::reduce::map_particles;
 use rayon::prelude::*;
 
 impl<const D: usize> Solver<D> {
+    /// Particle shifting (Fickian, Lind et al. 2012) with a diffusion coefficient that follows
+    /// the local shear rate, D = A l0^2 sqrt(Pi_i) (as shear-induced self-diffusion does):
+    /// dr_i = -A l0^2 sqrt(Pi_i) dt (d/n0) sum_j r_ij w(r_ij)/r_ij^2 over every neighbour
+    /// within the number-density radius. The sum points towards i's closest neighbours and is
+    /// zero on a lattice; sqrt(Pi) is zero at rest and in a rigid plug, and does not change
+    /// under a uniform motion, so neither a fluid at rest nor a translating or unyielded block
+    /// is shifted. Where the stencil is incomplete (n_i < n0: the free surface and the rows
+    /// under it) only the part along the surface is kept (normal from the kernel-weighted
+    /// directions to the neighbours within the Laplacian radius), so that the fluid keeps its
+    /// volume. At most `particle_shifting_limit_m` per step. Velocity and carried pressure
+    /// move with the particle unchanged (measured: carrying the pressure to the new position
+    /// to first order, p + dr . grad(p), leaves a tank at rest as it was and lets the 12 mm
+    /// slump creep on to +2.4 % of its closed form; docs/validation.md, "Particle shifting").
+    pub(super) fn shift_particles(&mut self, dt_s: f64) {
+        let c = &self.config;
+        let l0 = c.spacing_m;
+        let scale = -c.particle_shifting * l0 * l0 * dt_s * D as f64 / self.refs.n0;
+        let limit_m = c.particle_shifting_limit_m;
+        let surface_n = c.surface_threshold * self.refs.n0;
+        let rheology = c.rheology;
+        let density = self.number_density();
+        let p = &self.particles;
+        let (near, lap) = (&self.pairs.near, &self.pairs.lap);
+        let refs = self.refs;
+        // Pi from this step's viscous stage (empty only before a first step).
+        let strain = &self.strain_invariant;
+        let shifts: Vec<Vector<D>> = map_particles(p.len(), |i| {
+            let pi = strain.get(i).copied().unwrap_or(0.0);
+            // Non-flowing (Pi <= Pi_c) material is not shifted: a heap at rest keeps its
+            // arrangement, whatever noise its strain rate holds.
+            if p.kind[i] != ParticleKind::Fluid || pi == 0.0 || !rheology.is_flowing(pi) {
+                return Vector::<D>::zeros();
+            }
+            let shear_rate_1_s = pi.sqrt();
+            // At the free surface only neighbours closer than a spacing count: there the
+            // kernel sum also reads the truncated stencil's rows below (measured: a tank at
+            // rest then drifts its top row along the surface at 0.017 m/s).
+            let crowd = if density[i] < surface_n {
+                difference_sum(&p.position_m, near, i, refs.radius_n_m, |_, r| {
+                    (r.norm_squared() < l0 * l0).then_some(1.0)
+                })
+            } else {
+                difference_sum(&p.position_m, near, i, refs.radius_n_m, |_, _| Some(1.0))
+            };
+            let mut dr = crowd * (scale * shear_rate_1_s);
+            if density[i] < refs.n0 {
+                let mut inward = Vector::<D>::zeros();
+                for &j in lap.of(i) {
+                    let r = lap.displacement(&p.position_m, i, j as usize);
+                    let d = r.norm();
+                    let w = weight(d, refs.radius_lap_m);
+                    if w > 0.0 {
+                        inward += r * (w / d);
+                    }
+                }
+                let length = inward.norm();
+                if length > 0.0 {
+                    let n = inward / length;
+                    dr -= n * n.dot(&dr);
+                }
+            }
+            let length = dr.norm();
+            if length > limit_m {
+                dr *= limit_m / length;
+            }
+            dr
+        });
+        for (x, dr) in self.particles.position_m.iter_mut().zip(&shifts) {
+            *x += *dr;
+        }
+    }
+
     /// Dynamic stabilisation (Tsuruta, Khayyer & Gotoh 2013, simplified): each fluid particle
     /// closer than `distance_m` to another gets the velocity that moves it back by its share
     /// of the shortfall within this step, along the pair's axis: half against fluid (equal and
