@@ -35,12 +35,12 @@ impl<const D: usize> Solver<D> {
         let p = &self.particles;
         let (near, lap) = (&self.pairs.near, &self.pairs.lap);
         let refs = self.refs;
-        // Pi from this step's viscous stage (empty only before a first step).
+        // Pi from this step's viscous stage.
         let strain = &self.strain_invariant;
         let shifts: Vec<Vector<D>> = map_particles(p.len(), |i| {
             let pi = strain.get(i).copied().unwrap_or(0.0);
-            // Non-flowing (Pi <= Pi_c) material is not shifted: a heap at rest keeps its
-            // arrangement, whatever noise its strain rate holds.
+            // Non-flowing (Pi <= Pi_c) material is not shifted: an unyielded plug keeps its
+            // arrangement.
             if p.kind[i] != ParticleKind::Fluid || pi == 0.0 || !rheology.is_flowing(pi) {
                 return Vector::<D>::zeros();
             }
