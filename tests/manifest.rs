@@ -753,20 +753,14 @@ fn invalid_values_are_named_and_located() {
     let e = err_with(MINIMAL, &["mps.surface_depth=1.5"]);
     assert_invalid(&e, "mps.surface_depth", None, &["[0, 1]", "1.5"]);
     // The shifting's limit is part of the experiment once shifting is on.
-    let shifted = ok_with(
-        MINIMAL,
-        &[
-            "mps.pressure_scheme=incremental",
-            "mps.particle_shifting=40",
-        ],
-    );
+    let shifting = [
+        "mps.pressure_scheme=incremental",
+        "mps.particle_shifting=40",
+    ];
+    let shifted = ok_with(MINIMAL, &shifting);
     let limited = ok_with(
         MINIMAL,
-        &[
-            "mps.pressure_scheme=incremental",
-            "mps.particle_shifting=40",
-            "mps.particle_shifting_limit=0.1",
-        ],
+        &[&shifting[..], &["mps.particle_shifting_limit=0.1"]].concat(),
     );
     assert_ne!(shifted.hash_hex, limited.hash_hex);
     let e = err_with(MINIMAL, &["mps.particle_shifting=-1"]);
