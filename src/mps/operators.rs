@@ -25,6 +25,33 @@ pub fn number_density<const D: usize>(
     n
 }
 
+/// sum_j r_ij w(|r_ij|) / |r_ij| over neighbours j accepted by `include(j, r_ij)`: the
+/// kernel-weighted direction towards the neighbours, which points into the fluid at a free
+/// surface (minus the outward normal, once normalised).
+#[inline]
+pub fn inward_sum<const D: usize>(
+    positions: &[Vector<D>],
+    nb: &Neighbours,
+    i: usize,
+    radius_m: f64,
+    include: impl Fn(usize, &Vector<D>) -> bool,
+) -> Vector<D> {
+    let mut inward = Vector::<D>::zeros();
+    for &j in nb.of(i) {
+        let j = j as usize;
+        let r = nb.displacement(positions, i, j);
+        if !include(j, &r) {
+            continue;
+        }
+        let d = r.norm();
+        let w = weight(d, radius_m);
+        if w > 0.0 {
+            inward += r * (w / d);
+        }
+    }
+    inward
+}
+
 /// Gradient model (eq. 3): d/n0 sum_j (phi_j - phi_i) r_ij w(|r_ij|) / |r_ij|^2, where
 /// `difference(j)` returns phi_j - phi_i (or None to skip j).
 #[inline]

@@ -3,8 +3,7 @@
 
 use super::{Solver, per_particle};
 use crate::mps::grid::Neighbours;
-use crate::mps::kernel::weight;
-use crate::mps::operators::difference_sum;
+use crate::mps::operators::{difference_sum, inward_sum, number_density};
 use crate::mps::particles::{ParticleKind, Vector};
 use crate::mps::reduce::PARTICLES_PER_TASK;
 use crate::mps::reduce::map_particles;
@@ -31,7 +30,6 @@ impl<const D: usize> Solver<D> {
         let limit_m = c.particle_shifting_limit_m;
         let surface_n = c.surface_threshold * self.refs.n0;
         let rheology = c.rheology;
-        let density = self.number_density();
         let p = &self.particles;
         let (near, lap) = (&self.pairs.near, &self.pairs.lap);
         let refs = self.refs;
@@ -45,27 +43,17 @@ impl<const D: usize> Solver<D> {
                 return Vector::<D>::zeros();
             }
             let shear_rate_1_s = pi.sqrt();
+            let density = number_density(&p.position_m, near, i, refs.radius_n_m, |_| true);
             // At the free surface only neighbours closer than a spacing count: there the
             // kernel sum also reads the truncated stencil's rows below (measured: a tank at
             // rest then drifts its top row along the surface at 0.017 m/s).
-            let crowd = if density[i] < surface_n {
-                difference_sum(&p.position_m, near, i, refs.radius_n_m, |_, r| {
-                    (r.norm_squared() < l0 * l0).then_some(1.0)
-                })
-            } else {
-                difference_sum(&p.position_m, near, i, refs.radius_n_m, |_, _| Some(1.0))
-            };
+            let at_surface = density < surface_n;
+            let crowd = difference_sum(&p.position_m, near, i, refs.radius_n_m, |_, r| {
+                (!at_surface || r.norm_squared() < l0 * l0).then_some(1.0)
+            });
             let mut dr = crowd * (scale * shear_rate_1_s);
-            if density[i] < refs.n0 {
-                let mut inward = Vector::<D>::zeros();
-                for &j in lap.of(i) {
-                    let r = lap.displacement(&p.position_m, i, j as usize);
-                    let d = r.norm();
-                    let w = weight(d, refs.radius_lap_m);
-                    if w > 0.0 {
-                        inward += r * (w / d);
-                    }
-                }
+            if density < refs.n0 {
+                let inward = inward_sum(&p.position_m, lap, i, refs.radius_lap_m, |_, _| true);
                 let length = inward.norm();
                 if length > 0.0 {
                     let n = inward / length;

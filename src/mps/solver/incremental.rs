@@ -31,7 +31,7 @@
 use super::{PARTICLES_PER_TASK, ParticleKind, PressureScheme, SolveReport, Solver, StepError};
 use crate::mps::kernel::weight;
 use crate::mps::operators::{
-    MIN_DET_RATIO, corrected_gradient, difference_sum, divergence, gradient_correction,
+    MIN_DET_RATIO, corrected_gradient, difference_sum, divergence, gradient_correction, inward_sum,
     moment_matrix,
 };
 use crate::mps::particles::Vector;
@@ -384,19 +384,9 @@ impl<const D: usize> Solver<D> {
             if !surface[i] {
                 return 0.0;
             }
-            let mut inward = Vector::<D>::zeros();
-            for &j in nb.of(i) {
-                let j = j as usize;
-                let r = nb.displacement(&p.position_m, i, j);
-                if p.kind[j] != ParticleKind::Fluid && -r.dot(&down) > above_m {
-                    continue;
-                }
-                let d = r.norm();
-                let w = weight(d, self.refs.radius_n_m);
-                if w > 0.0 {
-                    inward += r * (w / d);
-                }
-            }
+            let inward = inward_sum(&p.position_m, nb, i, self.refs.radius_n_m, |j, r| {
+                p.kind[j] == ParticleKind::Fluid || -r.dot(&down) <= above_m
+            });
             let length = inward.norm();
             if length == 0.0 {
                 return 0.0;
