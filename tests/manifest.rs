@@ -1089,3 +1089,20 @@ fn slip_lengths_of_the_rod_and_the_cone_are_part_of_the_experiment_only_when_set
         assert!(e.contains(field) && e.contains("-0.001"), "{e}");
     }
 }
+
+#[test]
+fn the_quarter_slump_is_part_of_the_experiment_only_when_set() {
+    let path = common::experiment("slump_3d.yaml");
+    let whole = experiment::load(&path, &[]).unwrap();
+    let explicit = experiment::load(&path, &["scene.quarter_domain=false".to_string()]).unwrap();
+    // False is the whole slump as before the field: the canonical form and hash are unchanged.
+    assert!(
+        !whole.canonical.contains("quarter_domain"),
+        "{}",
+        whole.canonical
+    );
+    assert_eq!(whole.hash_hex, explicit.hash_hex);
+    let quarter = experiment::load(&path, &["scene.quarter_domain=true".to_string()]).unwrap();
+    assert!(quarter.canonical.contains("\"quarter_domain\":true"));
+    assert_ne!(whole.hash_hex, quarter.hash_hex);
+}

@@ -177,5 +177,6 @@ pub fn build<const D: usize>(
         inlets: Vec::new(),
         gravity_tilt_rad: 0.0,
         periodic_x: None,
+        symmetry: Default::default(),
     }
 }

@@ -145,6 +145,7 @@ impl Experiment for InclinedLayer {
             inlets: Vec::new(),
             gravity_tilt_rad: self.incline_rad(),
             periodic_x: Some(self.period(l0)),
+            symmetry: Default::default(),
         }
     }
     fn domain<const D: usize>(&self, m: &Manifest) -> (Vector<D>, Vector<D>) {

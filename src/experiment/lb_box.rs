@@ -275,6 +275,7 @@ impl Experiment for LbBox {
             inlets: vec![self.inlet(l0)],
             gravity_tilt_rad: 0.0,
             periodic_x: None,
+            symmetry: Default::default(),
         }
     }
 

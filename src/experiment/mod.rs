@@ -50,6 +50,8 @@ pub struct Scene<const D: usize> {
     pub gravity_tilt_rad: f64,
     /// A periodic x axis (the inclined layer); None else.
     pub periodic_x: Option<mps::PeriodicX>,
+    /// Mirror symmetry planes (a quarter of the slump); none else.
+    pub symmetry: mps::grid::MirrorPlanes,
 }
 
 /// What makes a test that test. Each method gets the whole manifest (spacing, fluid, MPS

@@ -350,6 +350,7 @@ impl Experiment for Rodding {
             inlets: Vec::new(),
             gravity_tilt_rad: 0.0,
             periodic_x: None,
+            symmetry: Default::default(),
         }
     }
 

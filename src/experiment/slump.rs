@@ -16,6 +16,7 @@
 use super::geometry::lattice::{cells, centre, for_each_index};
 use super::{Curve, Experiment, Manifest, Scene, SurfaceProfile, yield_stress_pa};
 use crate::manifest::validate::{Checker, NON_NEGATIVE, POSITIVE, fmt_num};
+use crate::mps::grid::MirrorPlanes;
 use crate::mps::particles::cell_volume;
 use crate::mps::{ParticleKind, Particles, Path, RigidBody, Vector};
 use serde::{Deserialize, Serialize};
@@ -45,6 +46,9 @@ pub struct Slump {
     /// Navier slip length of the cone's steel, in metres (0: no slip at its surface; large:
     /// free slip). Absent: the cone's particles carry its velocity, as every wall does.
     pub cone_slip_length_m: Option<f64>,
+    /// Simulate one quarter (x >= 0, y >= 0) between two mirror symmetry planes through the
+    /// axis (free-slip planes of symmetry); metrics are those of the whole slump.
+    pub quarter_domain: bool,
 }
 
 impl Default for Slump {
@@ -58,6 +62,7 @@ impl Default for Slump {
             lift_start_s: 0.0,
             lift_height_m: 0.4,
             cone_slip_length_m: None,
+            quarter_domain: false,
         }
     }
 }
@@ -93,6 +98,17 @@ impl Experiment for Slump {
             c.real("scene.cone_slip_length_m", b, NON_NEGATIVE);
         }
         c.real("scene.lift_start_s", self.lift_start_s, NON_NEGATIVE);
+        // The exact projection's gradient rows have no mirror images.
+        if self.quarter_domain
+            && m.mps.exact_projection
+            && m.mps.pressure_scheme != crate::manifest::PressureSchemeName::Standard
+        {
+            c.fail(
+                "scene.quarter_domain",
+                "is not available with mps.exact_projection (its gradient rows have no mirror images)"
+                    .into(),
+            );
+        }
         c.real("scene.lift_height_m", self.lift_height_m, POSITIVE);
         if all_ok {
             let widest = self.cone_bottom_diameter_m.max(self.cone_top_diameter_m);
@@ -161,7 +177,8 @@ impl Experiment for Slump {
         let l0 = m.spacing_m;
         // Fluid lifted above the cone's height (stuck to its wall) is not part of the pancake.
         let z_max = self.cone_height_m;
-        let radii = spread_radii_m(particles, l0, z_max);
+        let all_radii = spread_radii_m(particles, l0, z_max);
+        let radii = self.sectors(&all_radii);
         let mean = radii.iter().sum::<f64>() / radii.len() as f64;
         let min = radii.iter().copied().fold(f64::INFINITY, f64::min);
         let max = radii.iter().copied().fold(0.0, f64::max);
@@ -178,7 +195,8 @@ impl Experiment for Slump {
             let (rho, g) = (m.fluid.density_kg_m3(), m.gravity_m_s2);
             let on_plate = (0..particles.len())
                 .filter(|&i| on_plate(particles, i, z_max))
-                .count();
+                .count()
+                * self.copies();
             out.insert("fluid_on_plate_count".into(), on_plate as f64);
             let volume = on_plate as f64 * cell_volume(l0, D);
             let radius = closed_form_radius_m(rho, g, volume, tau);
@@ -270,11 +288,13 @@ impl Slump {
         }
         let (l0, rho, g) = (m.spacing_m, m.fluid.density_kg_m3(), m.gravity_m_s2);
         let z_max = self.cone_height_m;
-        let radii = spread_radii_m(particles, l0, z_max);
+        let all_radii = spread_radii_m(particles, l0, z_max);
+        let radii = self.sectors(&all_radii);
         let radius_m = radii.iter().sum::<f64>() / radii.len() as f64;
         let count = (0..particles.len())
             .filter(|&i| on_plate(particles, i, z_max))
-            .count();
+            .count()
+            * self.copies();
         let volume = count as f64 * cell_volume(l0, 3);
         let closed_form_radius_m = closed_form_radius_m(rho, g, volume, tau);
         let points = (0..)
@@ -354,6 +374,21 @@ impl SlumpProfile {
 }
 
 impl Slump {
+    /// How many copies of the simulated part make the whole slump (4 for a quarter).
+    pub fn copies(&self) -> usize {
+        if self.quarter_domain { 4 } else { 1 }
+    }
+
+    /// The sectors of `radii` (see [`spread_radii_m`]) that the simulated part covers: the
+    /// two octants of the first quadrant for a quarter, all eight else.
+    pub fn sectors<'a>(&self, radii: &'a [f64; SECTORS]) -> &'a [f64] {
+        if self.quarter_domain {
+            &radii[..2]
+        } else {
+            radii
+        }
+    }
+
     /// Inner radius of the cone at height z (linear from bottom to top).
     pub fn radius_at_m(&self, z_m: f64) -> f64 {
         let (rb, rt) = (
@@ -401,9 +436,12 @@ pub fn build<const D: usize>(
     let reach = (rb / l0).ceil() as i64 + layers + 1;
     let horizontal_r2 = |x: &Vector<D>| x[0] * x[0] + x[1] * x[1];
     let mut particles = Particles::<D>::default();
+    // A quarter: the cells with x, y > 0 (the axis is a cell corner, so the mirror images of
+    // these cells across x = 0 and y = 0 are the lattice's other cells).
+    let start = |reach: i64| if p.quarter_domain { 0 } else { -reach };
 
     // Fluid inside the frustum.
-    let lo: [i64; D] = std::array::from_fn(|a| if a == D - 1 { 0 } else { -reach });
+    let lo: [i64; D] = std::array::from_fn(|a| if a == D - 1 { 0 } else { start(reach) });
     let hi: [i64; D] = std::array::from_fn(|a| if a == D - 1 { height } else { reach });
     for_each_index(lo, hi, |idx| {
         let x = centre(idx, l0);
@@ -415,7 +453,7 @@ pub fn build<const D: usize>(
 
     // Plate: wall layers right under z = 0, then dummies.
     let plate_lo: [i64; D] =
-        std::array::from_fn(|a| if a == D - 1 { -layers } else { -half_plate });
+        std::array::from_fn(|a| if a == D - 1 { -layers } else { start(half_plate) });
     let plate_hi: [i64; D] = std::array::from_fn(|a| if a == D - 1 { 0 } else { half_plate });
     for_each_index(plate_lo, plate_hi, |idx| {
         let kind = if idx[D - 1] >= -i64::from(wall_layers) {
@@ -473,6 +511,14 @@ pub fn build<const D: usize>(
         inlets: Vec::new(),
         gravity_tilt_rad: 0.0,
         periodic_x: None,
+        symmetry: if p.quarter_domain {
+            MirrorPlanes {
+                axes: 0b011,
+                position_m: [0.0; 3],
+            }
+        } else {
+            MirrorPlanes::default()
+        },
     }
 }
 

@@ -116,6 +116,12 @@ pub fn canonical_text<S: SceneSection>(manifest: &Manifest<S>) -> String {
             map.remove(key);
         }
     }
+    // The whole slump is the scene as it was before the quarter existed.
+    if let Some(scene) = value.get_mut("scene").and_then(Value::as_object_mut)
+        && scene.get("quarter_domain") == Some(&Value::Bool(false))
+    {
+        scene.remove("quarter_domain");
+    }
     // A body without a slip length carries its velocity as walls did before the field.
     if let Some(bodies) = value
         .pointer_mut("/boundaries/bodies")

@@ -1,5 +1,6 @@
 //! Cell-list neighbour search in O(N) with a fixed neighbour order.
 use super::particles::Vector;
+use super::sparse::CsrMatrix;
 use rayon::prelude::*;
 
 /// Particles per parallel work item when building lists: a constant, so the split (and the
@@ -10,13 +11,47 @@ const LIST_CHUNK: usize = 512;
 /// nearby walls have lists, often in a short range of indices).
 const FILTER_CHUNK: usize = 64;
 
+/// Bits of a list entry above this hold the symmetry planes its particle is reflected
+/// across (bit a: the plane normal to axis a); the bits below, the particle's index.
+const MIRROR_SHIFT: u32 = 29;
+const INDEX_MASK: u32 = (1 << MIRROR_SHIFT) - 1;
+
+/// The most particles a list can index (the top bits of an entry name mirror images).
+pub const MAX_PARTICLES: usize = INDEX_MASK as usize;
+
+/// The particle a list entry refers to (a mirror image refers to its source).
+#[inline]
+pub fn entry_index(e: u32) -> usize {
+    (e & INDEX_MASK) as usize
+}
+
+/// Mirror symmetry planes x_a = position_m[a] for the axes a set in `axes` (bit a): the
+/// domain lies on the side x_a >= position_m[a], and every particle within reach of a plane
+/// has a mirror image beyond it that the lists hold as an entry of its own (same index,
+/// plane bits set): a scalar field reads the source's value, a vector field the source's
+/// value with the plane's normal component negated, a displacement the reflected position.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct MirrorPlanes {
+    pub axes: u32,
+    pub position_m: [f64; 3],
+}
+
+impl MirrorPlanes {
+    pub fn is_empty(&self) -> bool {
+        self.axes == 0
+    }
+}
+
 /// Neighbour lists in compressed rows: the neighbours of i are
-/// `indices[offsets[i]..offsets[i + 1]]`, in ascending index order.
+/// `indices[offsets[i]..offsets[i + 1]]`, in ascending index order (then mirror images,
+/// see [`MirrorPlanes`], by plane bits and then by index). Entries are read with
+/// [`entry_index`], [`Neighbours::displacement`] and [`Neighbours::reflect`].
 #[derive(Debug, Clone, Default)]
 pub struct Neighbours {
     pub cutoff_m: f64,
     /// Period of a periodic x axis (minimum-image displacements), if any.
     pub period_x_m: Option<f64>,
+    pub mirror: MirrorPlanes,
     pub offsets: Vec<usize>,
     pub indices: Vec<u32>,
 }
@@ -27,19 +62,91 @@ impl Neighbours {
         &self.indices[self.offsets[i]..self.offsets[i + 1]]
     }
 
-    /// r_ij = r_j - r_i, the nearest periodic image along x when x is periodic.
+    /// r_ij = r_j - r_i for list entry `e` of i: the nearest periodic image along x when x is
+    /// periodic, the reflected position for a mirror image.
     #[inline]
     pub fn displacement<const D: usize>(
         &self,
         positions: &[Vector<D>],
         i: usize,
-        j: usize,
+        e: u32,
     ) -> Vector<D> {
+        let j = entry_index(e);
         let mut r = positions[j] - positions[i];
+        let planes = e >> MIRROR_SHIFT;
+        if planes != 0 {
+            for a in 0..D {
+                if planes >> a & 1 == 1 {
+                    r[a] = (2.0 * self.mirror.position_m[a] - positions[j][a]) - positions[i][a];
+                }
+            }
+        }
         if let Some(period) = self.period_x_m {
             r[0] -= period * (r[0] / period).round();
         }
         r
+    }
+
+    /// A vector value of entry `e`'s particle as its mirror image carries it: the planes'
+    /// normal components negated (unchanged for a plain entry).
+    #[inline]
+    pub fn reflect<const D: usize>(&self, e: u32, mut v: Vector<D>) -> Vector<D> {
+        let planes = e >> MIRROR_SHIFT;
+        if planes != 0 {
+            for a in 0..D {
+                if planes >> a & 1 == 1 {
+                    v[a] = -v[a];
+                }
+            }
+        }
+        v
+    }
+
+    /// -1 when entry `e` is a mirror image across the plane normal to `axis`, else 1: the
+    /// sign with which it carries component `axis` of a vector field.
+    #[inline]
+    pub fn component_sign(e: u32, axis: usize) -> f64 {
+        if (e >> MIRROR_SHIFT) >> axis & 1 == 1 {
+            -1.0
+        } else {
+            1.0
+        }
+    }
+
+    /// The plane bits of entry `e` in place (0 for a plain entry), to ride along a matrix
+    /// column index until [`Neighbours::component_matrix`] takes them out.
+    #[inline]
+    pub fn plane_bits(e: u32) -> u32 {
+        e & !INDEX_MASK
+    }
+
+    /// The matrix of velocity component `axis` from one assembled with plane bits in its
+    /// columns ([`Neighbours::plane_bits`]): a column whose image negates that component
+    /// changes sign, and row k's diagonal gains `own_image(k)`.
+    pub fn component_matrix(
+        matrix: &CsrMatrix,
+        axis: usize,
+        own_image: impl Fn(usize) -> f64,
+    ) -> CsrMatrix {
+        CsrMatrix {
+            diagonal: (0..matrix.rows())
+                .map(|k| matrix.diagonal[k] + own_image(k))
+                .collect(),
+            row_offsets: matrix.row_offsets.clone(),
+            columns: matrix.columns.iter().map(|&c| c & INDEX_MASK).collect(),
+            values: matrix
+                .columns
+                .iter()
+                .zip(&matrix.values)
+                .map(|(&c, &v)| v * Self::component_sign(c, axis))
+                .collect(),
+        }
+    }
+
+    /// Whether entry `e` is i's own mirror image.
+    #[inline]
+    pub fn is_own_image(e: u32, i: usize) -> bool {
+        e >> MIRROR_SHIFT != 0 && entry_index(e) == i
     }
 
     /// All j != i with |r_j - r_i| < cutoff_m, for every particle.
@@ -118,14 +225,14 @@ impl Neighbours {
                         let mut fluid_within = false;
                         for &j in self.of(i) {
                             // |r| < radius exactly when |r|^2 < the radius' threshold.
-                            let d2 = self.displacement(positions, i, j as usize).norm_squared();
+                            let d2 = self.displacement(positions, i, j).norm_squared();
                             outer[len_outer] = j;
                             inner[len_inner] = j;
                             let in_outer = d2 > 0.0 && d2 < outer2;
                             len_outer += usize::from(in_outer);
                             len_inner += usize::from(d2 > 0.0 && d2 < inner2);
                             if check && in_outer {
-                                fluid_within |= is_fluid(j as usize);
+                                fluid_within |= is_fluid(entry_index(j));
                             }
                         }
                         if check && !fluid_within {
@@ -142,8 +249,8 @@ impl Neighbours {
             .collect();
         let (outer, inner): (Vec<Chunk>, Vec<Chunk>) = chunks.into_iter().unzip();
         (
-            Self::from_chunks(outer_m, self.period_x_m, outer),
-            Self::from_chunks(inner_m, self.period_x_m, inner),
+            Self::from_chunks(outer_m, self.period_x_m, self.mirror, outer),
+            Self::from_chunks(inner_m, self.period_x_m, self.mirror, inner),
         )
     }
 
@@ -151,7 +258,7 @@ impl Neighbours {
     pub fn listed(&self, n: usize) -> Vec<bool> {
         let mut mark = vec![false; n];
         for &j in &self.indices {
-            mark[j as usize] = true;
+            mark[entry_index(j)] = true;
         }
         mark
     }
@@ -172,6 +279,7 @@ impl Neighbours {
         Self {
             cutoff_m: self.cutoff_m,
             period_x_m: self.period_x_m,
+            mirror: self.mirror,
             offsets,
             indices,
         }
@@ -180,6 +288,7 @@ impl Neighbours {
     fn from_chunks(
         cutoff_m: f64,
         period_x_m: Option<f64>,
+        mirror: MirrorPlanes,
         chunks: Vec<(Vec<usize>, Vec<u32>)>,
     ) -> Self {
         let mut offsets = Vec::with_capacity(chunks.iter().map(|c| c.0.len()).sum::<usize>() + 1);
@@ -194,6 +303,7 @@ impl Neighbours {
         Self {
             cutoff_m,
             period_x_m,
+            mirror,
             offsets,
             indices,
         }
@@ -215,19 +325,72 @@ impl Neighbours {
 
     /// Lists for the particles with `centre(i)`, then for those with `then(i)` that the
     /// first lists hold, merged row by row (walls near the fluid: one cell grid for both).
+    /// With `mirror` planes, the lists also hold the mirror images of the active particles
+    /// closer than the cutoff to a plane (images are never centres).
     pub fn build_centres_then_listed<const D: usize>(
         positions: &[Vector<D>],
         cutoff_m: f64,
         period_x_m: Option<f64>,
+        mirror: MirrorPlanes,
         active: impl Fn(usize) -> bool + Sync,
         centre: impl Fn(usize) -> bool + Sync,
         then: impl Fn(usize) -> bool + Sync,
     ) -> Self {
-        let grid = CellGrid::new(positions, cutoff_m, period_x_m);
-        let first = grid.lists(positions, &active, &centre);
-        let listed = first.listed(positions.len());
-        let second = grid.lists(positions, &active, &|i: usize| listed[i] && then(i));
-        first.merged(&second)
+        let n = positions.len();
+        assert!(
+            n <= MAX_PARTICLES,
+            "{n} particles, more than {MAX_PARTICLES}"
+        );
+        if mirror.is_empty() {
+            let grid = CellGrid::new(positions, cutoff_m, period_x_m);
+            let first = grid.lists(positions, &active, &centre);
+            let listed = first.listed(n);
+            let second = grid.lists(positions, &active, &|i: usize| listed[i] && then(i));
+            return first.merged(&second);
+        }
+        // The images, appended after the particles in a fixed order (plane bits, then index),
+        // so that a list's order does not depend on which images existed when it was built.
+        let mut extended = positions.to_vec();
+        let mut images: Vec<u32> = Vec::new();
+        for planes in 1..8u32 {
+            if planes & mirror.axes != planes {
+                continue;
+            }
+            for (j, x) in positions.iter().enumerate() {
+                let near = (0..D)
+                    .filter(|a| planes >> a & 1 == 1)
+                    .all(|a| x[a] - mirror.position_m[a] < cutoff_m);
+                if near && active(j) {
+                    let mut image = *x;
+                    for a in (0..D).filter(|a| planes >> a & 1 == 1) {
+                        image[a] = 2.0 * mirror.position_m[a] - x[a];
+                    }
+                    extended.push(image);
+                    images.push(j as u32 | planes << MIRROR_SHIFT);
+                }
+            }
+        }
+        assert!(
+            extended.len() <= MAX_PARTICLES,
+            "too many particles with mirror images"
+        );
+        let active = |k: usize| k >= n || active(k);
+        let grid = CellGrid::new(&extended, cutoff_m, period_x_m);
+        let first = grid.lists(&extended, &active, &|k: usize| k < n && centre(k));
+        let listed = first.listed(extended.len());
+        let second = grid.lists(&extended, &active, &|k: usize| {
+            k < n && listed[k] && then(k)
+        });
+        let mut lists = first.merged(&second);
+        // Images have no lists of their own (they are last); their entries name the source.
+        lists.offsets.truncate(n + 1);
+        for e in &mut lists.indices {
+            if *e as usize >= n {
+                *e = images[*e as usize - n];
+            }
+        }
+        lists.mirror = mirror;
+        lists
     }
 
     fn build_general<const D: usize>(
@@ -336,6 +499,7 @@ impl<const D: usize> CellGrid<D> {
             return Neighbours {
                 cutoff_m,
                 period_x_m,
+                mirror: MirrorPlanes::default(),
                 offsets: vec![0],
                 indices: Vec::new(),
             };
@@ -344,6 +508,7 @@ impl<const D: usize> CellGrid<D> {
         let image = Neighbours {
             cutoff_m,
             period_x_m,
+            mirror: MirrorPlanes::default(),
             offsets: Vec::new(),
             indices: Vec::new(),
         };
@@ -389,8 +554,7 @@ impl<const D: usize> CellGrid<D> {
                         for &j in &sorted[start[f]..start[f + 1]] {
                             if j as usize != i
                                 && active(j as usize)
-                                && image.displacement(positions, i, j as usize).norm_squared()
-                                    < cutoff2
+                                && image.displacement(positions, i, j).norm_squared() < cutoff2
                             {
                                 list.push(j);
                             }
@@ -404,7 +568,7 @@ impl<const D: usize> CellGrid<D> {
                 (counts, list)
             })
             .collect();
-        Neighbours::from_chunks(cutoff_m, period_x_m, chunks)
+        Neighbours::from_chunks(cutoff_m, period_x_m, MirrorPlanes::default(), chunks)
     }
 }
 

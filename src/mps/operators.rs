@@ -2,7 +2,7 @@
 //!
 //! Each function gathers over the neighbour list of i in its fixed order, so results do not
 //! depend on the thread that computes them.
-use super::grid::Neighbours;
+use super::grid::{Neighbours, entry_index};
 use super::kernel::weight;
 use super::particles::Vector;
 
@@ -16,10 +16,10 @@ pub fn number_density<const D: usize>(
     include: impl Fn(usize) -> bool,
 ) -> f64 {
     let mut n = 0.0;
-    for &j in nb.of(i) {
-        let j = j as usize;
+    for &e in nb.of(i) {
+        let j = entry_index(e);
         if include(j) {
-            n += weight(nb.displacement(positions, i, j).norm(), radius_m);
+            n += weight(nb.displacement(positions, i, e).norm(), radius_m);
         }
     }
     n
@@ -37,9 +37,9 @@ pub fn inward_sum<const D: usize>(
     include: impl Fn(usize, &Vector<D>) -> bool,
 ) -> Vector<D> {
     let mut inward = Vector::<D>::zeros();
-    for &j in nb.of(i) {
-        let j = j as usize;
-        let r = nb.displacement(positions, i, j);
+    for &e in nb.of(i) {
+        let j = entry_index(e);
+        let r = nb.displacement(positions, i, e);
         if !include(j, &r) {
             continue;
         }
@@ -78,9 +78,9 @@ pub(crate) fn difference_sum<const D: usize>(
     difference: impl Fn(usize, &Vector<D>) -> Option<f64>,
 ) -> Vector<D> {
     let mut g = Vector::<D>::zeros();
-    for &j in nb.of(i) {
-        let j = j as usize;
-        let r = nb.displacement(positions, i, j);
+    for &e in nb.of(i) {
+        let j = entry_index(e);
+        let r = nb.displacement(positions, i, e);
         let r2 = r.norm_squared();
         let w = weight(r2.sqrt(), radius_m);
         if w == 0.0 {
@@ -94,8 +94,9 @@ pub(crate) fn difference_sum<const D: usize>(
 }
 
 /// Divergence model: d/n0 sum_j (u_j - u_i) . r_ij w(|r_ij|) / |r_ij|^2, where
-/// `difference(j)` returns u_j - u_i. Only the pair's radial relative velocity counts, so a
-/// shear along a no-slip wall adds nothing.
+/// `difference(e)` returns u_j - u_i for list entry e (a mirror image's u_j reflected, see
+/// [`Neighbours::reflect`]). Only the pair's radial relative velocity counts, so a shear
+/// along a no-slip wall adds nothing.
 #[inline]
 pub fn divergence<const D: usize>(
     positions: &[Vector<D>],
@@ -103,16 +104,15 @@ pub fn divergence<const D: usize>(
     i: usize,
     radius_m: f64,
     n0: f64,
-    difference: impl Fn(usize) -> Vector<D>,
+    difference: impl Fn(u32) -> Vector<D>,
 ) -> f64 {
     let mut s = 0.0;
-    for &j in nb.of(i) {
-        let j = j as usize;
-        let r = nb.displacement(positions, i, j);
+    for &e in nb.of(i) {
+        let r = nb.displacement(positions, i, e);
         let r2 = r.norm_squared();
         let w = weight(r2.sqrt(), radius_m);
         if w > 0.0 {
-            s += difference(j).dot(&r) * w / r2;
+            s += difference(e).dot(&r) * w / r2;
         }
     }
     s * (D as f64 / n0)
@@ -131,9 +131,9 @@ pub fn laplacian<const D: usize, const M: usize>(
     difference: impl Fn(usize) -> Option<nalgebra::SVector<f64, M>>,
 ) -> nalgebra::SVector<f64, M> {
     let mut s = nalgebra::SVector::<f64, M>::zeros();
-    for &j in nb.of(i) {
-        let j = j as usize;
-        let w = weight(nb.displacement(positions, i, j).norm(), radius_m);
+    for &e in nb.of(i) {
+        let j = entry_index(e);
+        let w = weight(nb.displacement(positions, i, e).norm(), radius_m);
         if w == 0.0 {
             continue;
         }
@@ -155,9 +155,8 @@ pub fn moment_matrix<const D: usize>(
     radius_m: f64,
 ) -> nalgebra::SMatrix<f64, D, D> {
     let mut m = nalgebra::SMatrix::<f64, D, D>::zeros();
-    for &j in nb.of(i) {
-        let j = j as usize;
-        let r = nb.displacement(positions, i, j);
+    for &e in nb.of(i) {
+        let r = nb.displacement(positions, i, e);
         let r2 = r.norm_squared();
         let w = weight(r2.sqrt(), radius_m);
         if w > 0.0 {

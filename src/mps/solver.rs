@@ -10,7 +10,7 @@
 //! collision pass (`contact.rs`); (11) the clock advances and the state is checked
 //! (`state.rs`).
 use super::body::RigidBody;
-use super::grid::{KernelPairs, Neighbours};
+use super::grid::{KernelPairs, MirrorPlanes, Neighbours};
 use super::inlet::Inlet;
 use super::kernel::RefValues;
 use super::particles::{ParticleKind, Particles, Vector};
@@ -47,6 +47,10 @@ pub struct SolverConfig<const D: usize> {
     /// x is periodic: positions are kept in [min_m, min_m + period_m) and pairs take the
     /// nearest image across the seam.
     pub periodic_x: Option<PeriodicX>,
+    /// Mirror symmetry planes bounding the domain (none: `MirrorPlanes::default()`): the
+    /// scene holds the part on their positive side, and every particle near a plane interacts
+    /// with the mirror images of its neighbours (a free-slip plane of symmetry).
+    pub symmetry: MirrorPlanes,
     pub radius_n_m: f64,
     pub radius_lap_m: f64,
     /// beta: a particle is on the free surface when n* < beta n0.

@@ -1,10 +1,10 @@
 //! Viscous stage of the step: strain rate, effective viscosity, the optional stress-gradient
 //! term of seed 000 eq. 8, and the implicit viscous predictor solved by CG.
-use super::grid::{KernelPairs, Neighbours};
+use super::grid::{KernelPairs, Neighbours, entry_index};
 use super::kernel::{RefValues, weight};
 use super::operators::{MIN_DET_RATIO, gradient_correction};
 use super::particles::{ParticleKind, Particles, Vector};
-use super::pressure::{Preconditioner, SolveReport, solve_pcg_many};
+use super::pressure::{Preconditioner, SolveReport, solve_pcg, solve_pcg_many};
 use super::reduce::PARTICLES_PER_TASK;
 use super::rheology::Rheology;
 use super::sparse::CsrMatrix;
@@ -135,10 +135,10 @@ impl<const D: usize> WallFrame<D> {
     ) -> Option<Self> {
         let wall = |j: usize| p.kind[j] != ParticleKind::Fluid && counts(j);
         let mut sum = Vector::<D>::zeros();
-        for &j in nb.of(i) {
-            let j = j as usize;
+        for &e in nb.of(i) {
+            let j = entry_index(e);
             if wall(j) {
-                let r = nb.displacement(&p.position_m, i, j);
+                let r = nb.displacement(&p.position_m, i, e);
                 sum += r * weight(r.norm(), radius_m);
             }
         }
@@ -148,10 +148,10 @@ impl<const D: usize> WallFrame<D> {
         }
         let normal = sum / length;
         let mut nearest = f64::INFINITY;
-        for &j in nb.of(i) {
-            let j = j as usize;
+        for &e in nb.of(i) {
+            let j = entry_index(e);
             if wall(j) {
-                let r = nb.displacement(&p.position_m, i, j);
+                let r = nb.displacement(&p.position_m, i, e);
                 if weight(r.norm(), radius_m) > 0.0 {
                     nearest = nearest.min(r.dot(&normal));
                 }
@@ -215,18 +215,18 @@ pub fn velocity_gradient<const D: usize>(
     let ui = p.velocity_m_s[i];
     let mut g = SMatrix::<f64, D, D>::zeros();
     let mut m = SMatrix::<f64, D, D>::zeros();
-    for &j in nb.of(i) {
-        let j = j as usize;
-        let r = nb.displacement(&p.position_m, i, j);
+    for &e in nb.of(i) {
+        let j = entry_index(e);
+        let r = nb.displacement(&p.position_m, i, e);
         let r2 = r.norm_squared();
         let w = weight(r2.sqrt(), refs.radius_n_m);
         if w == 0.0 {
             continue;
         }
         let du = if p.kind[j] == ParticleKind::Fluid {
-            p.velocity_m_s[j] - ui
+            nb.reflect(e, p.velocity_m_s[j]) - ui
         } else {
-            (p.velocity_m_s[j] - ui) * frames.factor(slip_walls, j, &r)
+            (nb.reflect(e, p.velocity_m_s[j]) - ui) * frames.factor(slip_walls, j, &r)
         };
         g += du * (r.transpose() * (w / r2));
         if corrected {
@@ -293,9 +293,9 @@ fn quadratic_gradient<const D: usize>(
     let mut heaviest = 0.0f64;
     let mut wall_velocity = None;
     let mut nearest_wall = f64::INFINITY;
-    for &j in nb.of(i) {
-        let j = j as usize;
-        let r = nb.displacement(&p.position_m, i, j);
+    for &e in nb.of(i) {
+        let j = entry_index(e);
+        let r = nb.displacement(&p.position_m, i, e);
         let d = r.norm();
         let w = weight(d, refs.radius_n_m);
         if w == 0.0 {
@@ -306,7 +306,7 @@ fn quadratic_gradient<const D: usize>(
             heaviest = heaviest.max(w);
             add(
                 &r,
-                &((p.velocity_m_s[j] - ui) * frames.factor(slip_walls, j, &r)),
+                &((nb.reflect(e, p.velocity_m_s[j]) - ui) * frames.factor(slip_walls, j, &r)),
                 w,
             );
             continue;
@@ -314,12 +314,12 @@ fn quadratic_gradient<const D: usize>(
         if frame.is_some() && p.kind[j] != ParticleKind::Fluid {
             if d < nearest_wall {
                 nearest_wall = d;
-                wall_velocity = Some(p.velocity_m_s[j]);
+                wall_velocity = Some(nb.reflect(e, p.velocity_m_s[j]));
             }
             continue;
         }
         heaviest = heaviest.max(w);
-        add(&r, &(p.velocity_m_s[j] - ui), w);
+        add(&r, &(nb.reflect(e, p.velocity_m_s[j]) - ui), w);
     }
     if let (Some(f), Some(u_w)) = (frame, wall_velocity) {
         add(&f.surface_point(), &(u_w - ui), heaviest.max(1.0));
@@ -451,6 +451,10 @@ pub fn predict_velocity<const D: usize>(
     }
     let coef = 2.0 * D as f64 / (refs.lambda_m2 * refs.n0_lap);
     // Row i: (s_i + sum_j c_ij) u_i - sum_fluid c_ij u_j = s_i rhs_i + sum_walls c_ij u_j.
+    // A mirror image carries its source's velocity with the plane's normal component
+    // negated, so with symmetry planes each component has its own matrix: an image's column
+    // enters with that sign (its plane bits ride in the column's top bits until the split
+    // below), and i's own image, u_i' - u_i = (sign - 1) u_i, on the diagonal only.
     let nb = &pairs.lap;
     let (matrix, extra) = CsrMatrix::assemble(rows.len(), |k, columns, values| {
         let i = rows[k];
@@ -461,6 +465,7 @@ pub fn predict_velocity<const D: usize>(
         };
         let mut diag = scale;
         let mut boundary = Vector::<D>::zeros();
+        let mut own_image = Vector::<D>::zeros();
         let slip_walls = &settings.slip_walls;
         let frames = Frames::of(
             p,
@@ -470,9 +475,9 @@ pub fn predict_velocity<const D: usize>(
             settings.wall_surface_m,
             slip_walls,
         );
-        for &j in nb.of(i) {
-            let j = j as usize;
-            let r = nb.displacement(&p.position_m, i, j);
+        for &e in nb.of(i) {
+            let j = entry_index(e);
+            let r = nb.displacement(&p.position_m, i, e);
             let mut a = coef * weight(r.norm(), refs.radius_lap_m);
             if a == 0.0 {
                 continue;
@@ -490,37 +495,66 @@ pub fn predict_velocity<const D: usize>(
             } else {
                 a
             };
+            if Neighbours::is_own_image(e, i) {
+                // 2c on the diagonal of each component the image negates.
+                own_image += nb.reflect(e, Vector::<D>::repeat(-c)).add_scalar(c);
+                continue;
+            }
             diag += c;
             if row_of[j] != u32::MAX {
-                columns.push(row_of[j]);
+                columns.push(row_of[j] | Neighbours::plane_bits(e));
                 values.push(-c);
             } else {
-                boundary += p.velocity_m_s[j] * c;
+                boundary += nb.reflect(e, p.velocity_m_s[j]) * c;
             }
         }
-        (diag, (scale, boundary))
+        (diag, (scale, boundary, own_image))
     });
-    // All velocity components in one run of side-by-side solves (one matrix pass per product).
-    let b: Vec<[f64; D]> = rows
-        .iter()
-        .zip(&extra)
-        .map(|(&i, (scale, boundary))| {
-            std::array::from_fn(|axis| rhs[i][axis] * scale + boundary[axis])
-        })
-        .collect();
     // Start from the current velocity: close to the answer, and part of the state.
     let mut x: Vec<[f64; D]> = rows
         .iter()
         .map(|&i| std::array::from_fn(|axis| p.velocity_m_s[i][axis]))
         .collect();
-    let reports = solve_pcg_many(
-        &matrix,
-        &b,
-        &mut x,
-        settings.tolerance,
-        settings.max_iterations,
-        Preconditioner::Jacobi,
-    );
+    let b: Vec<[f64; D]> = rows
+        .iter()
+        .zip(&extra)
+        .map(|(&i, (scale, boundary, _))| {
+            std::array::from_fn(|axis| rhs[i][axis] * scale + boundary[axis])
+        })
+        .collect();
+    let reports: Vec<SolveReport> = if nb.mirror.is_empty() {
+        // All velocity components in one run of side-by-side solves (one matrix pass per
+        // product).
+        solve_pcg_many(
+            &matrix,
+            &b,
+            &mut x,
+            settings.tolerance,
+            settings.max_iterations,
+            Preconditioner::Jacobi,
+        )
+        .to_vec()
+    } else {
+        (0..D)
+            .map(|axis| {
+                let component = Neighbours::component_matrix(&matrix, axis, |k| extra[k].2[axis]);
+                let b: Vec<f64> = b.iter().map(|v| v[axis]).collect();
+                let mut xa: Vec<f64> = x.iter().map(|v| v[axis]).collect();
+                let report = solve_pcg(
+                    &component,
+                    &b,
+                    &mut xa,
+                    settings.tolerance,
+                    settings.max_iterations,
+                    Preconditioner::Jacobi,
+                );
+                for (v, xa) in x.iter_mut().zip(xa) {
+                    v[axis] = xa;
+                }
+                report
+            })
+            .collect()
+    };
     for report in reports {
         solve.iterations += report.iterations;
         // As f64::max, but a NaN (a non-finite system) is kept rather than dropped.

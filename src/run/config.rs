@@ -53,6 +53,7 @@ pub fn solver_config<const D: usize>(m: &Manifest, scene: &Scene<D>) -> SolverCo
         gravity_m_s2: m.gravity_m_s2,
         gravity_tilt_rad: scene.gravity_tilt_rad,
         periodic_x: scene.periodic_x,
+        symmetry: scene.symmetry,
         radius_n_m: m.mps.number_density_radius * l0,
         radius_lap_m: m.mps.laplacian_radius * l0,
         surface_threshold: m.mps.surface_threshold,

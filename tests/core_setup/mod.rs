@@ -48,6 +48,7 @@ pub fn config<const D: usize>(
         gravity_m_s2: 9.81,
         gravity_tilt_rad: 0.0,
         periodic_x: None,
+        symmetry: Default::default(),
         radius_n_m: 2.1 * l0,
         radius_lap_m: 3.1 * l0,
         surface_threshold: 0.97,

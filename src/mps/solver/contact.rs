@@ -2,7 +2,7 @@
 //! stabilisation and particle shifting of the incremental scheme.
 
 use super::{Solver, per_particle};
-use crate::mps::grid::Neighbours;
+use crate::mps::grid::{Neighbours, entry_index};
 use crate::mps::operators::{difference_sum, inward_sum, number_density};
 use crate::mps::particles::{ParticleKind, Vector};
 use crate::mps::reduce::PARTICLES_PER_TASK;
@@ -78,7 +78,8 @@ impl<const D: usize> Solver<D> {
     /// least `distance_m` apart (a lattice at rest).
     pub(super) fn stabilise_pairs(&mut self, dt_s: f64, distance_m: f64) {
         let nb = &self.pairs.near;
-        let dv = self.pair_velocity_changes(nb, |_, j, r| {
+        let dv = self.pair_velocity_changes(nb, |_, e, r| {
+            let j = entry_index(e);
             let d = r.norm();
             if d >= distance_m || d == 0.0 {
                 return None;
@@ -93,12 +94,12 @@ impl<const D: usize> Solver<D> {
         self.apply_velocity_changes(&dv, dt_s);
     }
 
-    /// For every fluid particle i, minus the sum over its neighbours j in `nb` (in list order)
-    /// of `pair(i, j, r_ij)` where it is Some; zero elsewhere.
+    /// For every fluid particle i, minus the sum over its list entries e in `nb` (in list
+    /// order) of `pair(i, e, r_ij)` where it is Some; zero elsewhere.
     pub(super) fn pair_velocity_changes(
         &self,
         nb: &Neighbours,
-        pair: impl Fn(usize, usize, Vector<D>) -> Option<Vector<D>> + Sync,
+        pair: impl Fn(usize, u32, Vector<D>) -> Option<Vector<D>> + Sync,
     ) -> Vec<Vector<D>> {
         let p = &self.particles;
         (0..p.len())
@@ -110,9 +111,8 @@ impl<const D: usize> Solver<D> {
                 if p.kind[i] != ParticleKind::Fluid {
                     return dv;
                 }
-                for &j in nb.of(i) {
-                    let j = j as usize;
-                    if let Some(v) = pair(i, j, nb.displacement(&p.position_m, i, j)) {
+                for &e in nb.of(i) {
+                    if let Some(v) = pair(i, e, nb.displacement(&p.position_m, i, e)) {
                         dv -= v;
                     }
                 }
@@ -144,7 +144,8 @@ impl<const D: usize> Solver<D> {
         let d2 = c.collision_distance_m * c.collision_distance_m;
         let d2_wall = c.wall_collision_distance_m * c.wall_collision_distance_m;
         let e = c.collision_restitution;
-        let dv = self.pair_velocity_changes(nb, |i, j, r| {
+        let dv = self.pair_velocity_changes(nb, |i, entry, r| {
+            let j = entry_index(entry);
             if p.kind[j] == ParticleKind::Dummy {
                 return None;
             }
@@ -157,7 +158,7 @@ impl<const D: usize> Solver<D> {
                 return None;
             }
             let n = r / r2.sqrt();
-            let approach = (p.velocity_m_s[i] - p.velocity_m_s[j]).dot(&n);
+            let approach = (p.velocity_m_s[i] - nb.reflect(entry, p.velocity_m_s[j])).dot(&n);
             // Only approaching pairs collide; the fluid particle of a fluid-wall pair takes it all.
             (approach > 0.0).then(|| {
                 let share = if fluid_pair { 0.5 } else { 1.0 };

@@ -6,6 +6,7 @@
 //! the walls' treatment (Cummins & Rudman 1999 discuss exact against approximate projection
 //! in SPH). The price: A spans two rings of neighbours and is not symmetric (BiCGStab).
 use super::Solver;
+use crate::mps::grid::entry_index;
 use crate::mps::kernel::weight;
 use crate::mps::particles::{ParticleKind, Vector};
 use crate::mps::reduce::map_particles;
@@ -56,18 +57,18 @@ impl<const D: usize> Solver<D> {
             let mut fluid_weights: Vec<(u32, f64)> = Vec::new();
             let mut weight_sum = 0.0;
             for &j in nb.of(i) {
-                let r = nb.displacement(&p.position_m, i, j as usize);
+                let r = nb.displacement(&p.position_m, i, j);
                 let r2 = r.norm_squared();
                 let w = weight(r2.sqrt(), radius);
                 if w == 0.0 {
                     continue;
                 }
                 let e = r * (w / r2);
-                if p.kind[j as usize] == ParticleKind::Fluid || support[j as usize] {
+                if p.kind[entry_index(j)] == ParticleKind::Fluid || support[entry_index(j)] {
                     let ce = c * e;
                     entries.push((j, ce));
                     own -= ce;
-                    if p.kind[j as usize] == ParticleKind::Fluid {
+                    if p.kind[entry_index(j)] == ParticleKind::Fluid {
                         fluid_weights.push((j, w));
                         weight_sum += w;
                     }
@@ -111,7 +112,7 @@ impl<const D: usize> Solver<D> {
             let mut entries: Vec<(u32, f64)> = Vec::new();
             let mut all = Vector::<D>::zeros();
             for &j in nb.of(i) {
-                let r = nb.displacement(&p.position_m, i, j as usize);
+                let r = nb.displacement(&p.position_m, i, j);
                 let r2 = r.norm_squared();
                 let w = weight(r2.sqrt(), refs.radius_n_m);
                 if w == 0.0 {
@@ -119,9 +120,9 @@ impl<const D: usize> Solver<D> {
                 }
                 let e = r * (w / r2);
                 all += e;
-                if p.kind[j as usize] == ParticleKind::Fluid {
+                if p.kind[entry_index(j)] == ParticleKind::Fluid {
                     // -(d/n0) e_ij . G_j
-                    for &(col, g) in &gradient[j as usize] {
+                    for &(col, g) in &gradient[entry_index(j)] {
                         entries.push((col, -scale * e.dot(&g)));
                     }
                 }

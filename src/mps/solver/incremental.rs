@@ -29,6 +29,7 @@
 //! increment, and that fluid's carried gradient sees them no lower than itself) and pair
 //! stabilisation (`pair_stabilisation_m`, in `solver.rs`).
 use super::{PARTICLES_PER_TASK, ParticleKind, PressureScheme, SolveReport, Solver, StepError};
+use crate::mps::grid::entry_index;
 use crate::mps::kernel::weight;
 use crate::mps::operators::{
     MIN_DET_RATIO, corrected_gradient, difference_sum, divergence, gradient_correction, inward_sum,
@@ -162,8 +163,8 @@ impl<const D: usize> Solver<D> {
             .with_max_len(PARTICLES_PER_TASK)
             .map(|&i| {
                 let ui = p.velocity_m_s[i];
-                let div = divergence(&p.position_m, near, i, refs.radius_n_m, refs.n0, |j| {
-                    p.velocity_m_s[j] - ui
+                let div = divergence(&p.position_m, near, i, refs.radius_n_m, refs.n0, |e| {
+                    near.reflect(e, p.velocity_m_s[entry_index(e)]) - ui
                 });
                 if !is_fluid(i) {
                     return -rho / dt_s * div;
@@ -313,12 +314,12 @@ fn wall_reference<const D: usize>(
 ) -> f64 {
     let mut sum = 0.0;
     let mut weights = 0.0;
-    for &j in nb.of(i) {
-        let j = j as usize;
+    for &e in nb.of(i) {
+        let j = entry_index(e);
         if p.kind[j] != ParticleKind::Fluid {
             continue;
         }
-        let r = nb.displacement(&p.position_m, i, j);
+        let r = nb.displacement(&p.position_m, i, e);
         let w = weight(r.norm(), radius_m);
         if w > 0.0 {
             sum += w * (values[j] - rho_g.dot(&r));
@@ -404,8 +405,8 @@ impl<const D: usize> Solver<D> {
         let nb = &self.pairs.near;
         reach > 0.0
             && nb.of(i).iter().any(|&j| {
-                p.kind[j as usize] == kind
-                    && nb.displacement(&p.position_m, i, j as usize).norm() < reach
+                p.kind[entry_index(j)] == kind
+                    && nb.displacement(&p.position_m, i, j).norm() < reach
             })
     }
 

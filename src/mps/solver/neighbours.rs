@@ -14,6 +14,7 @@ impl<const D: usize> Solver<D> {
     pub(super) fn rebuild_neighbours(&mut self) {
         let started = Instant::now();
         self.wrap_periodic();
+        self.reflect_at_symmetry_planes();
         self.refresh_lists();
         self.timing.neighbours_s += started.elapsed().as_secs_f64();
     }
@@ -57,6 +58,28 @@ impl<const D: usize> Solver<D> {
         }
     }
 
+    /// A fluid particle that crossed a symmetry plane is reflected back, its normal velocity
+    /// reversed: its mirror image crossed the other way (specular reflection, free slip).
+    pub(super) fn reflect_at_symmetry_planes(&mut self) {
+        let planes = self.config.symmetry;
+        if planes.is_empty() {
+            return;
+        }
+        let p = &mut self.particles;
+        for i in 0..p.len() {
+            if p.kind[i] != ParticleKind::Fluid {
+                continue;
+            }
+            for a in (0..D).filter(|a| planes.axes >> a & 1 == 1) {
+                let plane = planes.position_m[a];
+                if p.position_m[i][a] < plane {
+                    p.position_m[i][a] = 2.0 * plane - p.position_m[i][a];
+                    p.velocity_m_s[i][a] = -p.velocity_m_s[i][a];
+                }
+            }
+        }
+    }
+
     pub(super) fn refresh_lists(&mut self) {
         let skin = LIST_SKIN * self.config.spacing_m;
         let p = &self.particles;
@@ -81,6 +104,7 @@ impl<const D: usize> Solver<D> {
             &p.position_m,
             cutoff_m,
             self.config.periodic_x.map(|x| x.period_m),
+            self.config.symmetry,
             active,
             |i| kind[i] == ParticleKind::Fluid,
             |i| kind[i] == ParticleKind::Wall,

@@ -3,6 +3,7 @@
 //! correction with the p_j - p_min gradient.
 
 use super::{Solver, SourceTerm, StepError, per_particle};
+use crate::mps::grid::{Neighbours, entry_index};
 use crate::mps::kernel::weight;
 use crate::mps::multigrid::Multigrid;
 use crate::mps::operators::{gradient, number_density};
@@ -99,13 +100,15 @@ impl<const D: usize> Solver<D> {
                 if mixed && p.kind[i].has_pressure() {
                     // Divergence model: d/n0 sum_j (u_j - u_i) . r_ij w / |r_ij|^2.
                     let mut div = 0.0;
-                    for &j in nb.of(i) {
-                        let j = j as usize;
-                        let r = nb.displacement(&p.position_m, i, j);
+                    for &e in nb.of(i) {
+                        let j = entry_index(e);
+                        let r = nb.displacement(&p.position_m, i, e);
                         let r2 = r.norm_squared();
                         let w = weight(r2.sqrt(), refs.radius_n_m);
                         if w > 0.0 {
-                            div += (p.velocity_m_s[j] - p.velocity_m_s[i]).dot(&r) * w / r2;
+                            div += (nb.reflect(e, p.velocity_m_s[j]) - p.velocity_m_s[i]).dot(&r)
+                                * w
+                                / r2;
                         }
                     }
                     b -= rho / dt_s * div * (D as f64 / refs.n0);
@@ -187,14 +190,15 @@ impl<const D: usize> Solver<D> {
             let i = rows[k];
             let mut diag = diag_extra;
             let mut known_sum = 0.0;
-            for &j in nb.of(i) {
-                let j = j as usize;
-                if !include(j) {
+            for &e in nb.of(i) {
+                let j = entry_index(e);
+                // i's own mirror image carries p_i: its term p_i' - p_i vanishes.
+                if !include(j) || Neighbours::is_own_image(e, i) {
                     continue;
                 }
                 let a = coef
                     * weight(
-                        nb.displacement(&p.position_m, i, j).norm(),
+                        nb.displacement(&p.position_m, i, e).norm(),
                         refs.radius_lap_m,
                     );
                 if a == 0.0 {
@@ -263,10 +267,10 @@ impl<const D: usize> Solver<D> {
                     return Vector::<D>::zeros();
                 }
                 let mut p_min = p.pressure_pa[i];
-                for &j in nb.of(i) {
-                    let j = j as usize;
+                for &e in nb.of(i) {
+                    let j = entry_index(e);
                     if p.kind[j].has_pressure()
-                        && weight(nb.displacement(&p.position_m, i, j).norm(), refs.radius_n_m)
+                        && weight(nb.displacement(&p.position_m, i, e).norm(), refs.radius_n_m)
                             > 0.0
                     {
                         p_min = p_min.min(p.pressure_pa[j]);
