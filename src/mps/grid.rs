@@ -120,27 +120,20 @@ impl Neighbours {
         e & !INDEX_MASK
     }
 
-    /// The matrix of velocity component `axis` from one assembled with plane bits in its
-    /// columns ([`Neighbours::plane_bits`]): a column whose image negates that component
-    /// changes sign, and row k's diagonal gains `own_image(k)`.
-    pub fn component_matrix(
-        matrix: &CsrMatrix,
-        axis: usize,
-        own_image: impl Fn(usize) -> f64,
+    /// `matrix`, assembled with plane bits in its columns ([`Neighbours::plane_bits`]), as
+    /// one matrix per velocity component ([`CsrMatrix::component_diagonal`]): row k's
+    /// diagonal for component m gains `own_image(k)[m]`.
+    pub fn component_matrices(
+        mut matrix: CsrMatrix,
+        own_image: impl Fn(usize) -> [f64; 3],
     ) -> CsrMatrix {
-        CsrMatrix {
-            diagonal: (0..matrix.rows())
-                .map(|k| matrix.diagonal[k] + own_image(k))
-                .collect(),
-            row_offsets: matrix.row_offsets.clone(),
-            columns: matrix.columns.iter().map(|&c| c & INDEX_MASK).collect(),
-            values: matrix
-                .columns
-                .iter()
-                .zip(&matrix.values)
-                .map(|(&c, &v)| v * Self::component_sign(c, axis))
-                .collect(),
-        }
+        matrix.component_diagonal = (0..matrix.rows())
+            .map(|k| {
+                let own = own_image(k);
+                std::array::from_fn(|m| matrix.diagonal[k] + own[m])
+            })
+            .collect();
+        matrix
     }
 
     /// Whether entry `e` is i's own mirror image.

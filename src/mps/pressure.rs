@@ -78,11 +78,10 @@ pub fn solve_pcg_many<const M: usize>(
     if !running.iter().any(|&r| r) {
         return reports;
     }
-    let inv_diag: Vec<f64> = a
-        .diagonal
-        .par_iter()
+    let inv_diag: Vec<[f64; M]> = (0..n)
+        .into_par_iter()
         .with_min_len(MIN_PARALLEL_LEN)
-        .map(|d| 1.0 / d)
+        .map(|i| std::array::from_fn(|m| 1.0 / a.diagonal_of(i, m)))
         .collect();
     let mut r = vec![[0.0; M]; n];
     a.multiply(x, &mut r);
@@ -96,14 +95,20 @@ pub fn solve_pcg_many<const M: usize>(
         });
     let multigrid = match preconditioner {
         Preconditioner::Jacobi => None,
-        Preconditioner::Multigrid(mg) => Some(mg),
+        Preconditioner::Multigrid(mg) => {
+            debug_assert!(
+                a.component_diagonal.is_empty(),
+                "multigrid of a scalar matrix only"
+            );
+            Some(mg)
+        }
     };
     let jacobi = multigrid.is_none();
     let mut z: Vec<[f64; M]> = if jacobi {
         r.par_iter()
             .with_min_len(MIN_PARALLEL_LEN)
             .zip(&inv_diag)
-            .map(|(r, d)| std::array::from_fn(|m| r[m] * d))
+            .map(|(r, d)| std::array::from_fn(|m| r[m] * d[m]))
             .collect()
     } else {
         vec![[0.0; M]; n]
@@ -179,7 +184,7 @@ pub fn solve_pcg_many<const M: usize>(
                             x[k][m] += alpha[m] * p[i][m];
                             r[k][m] -= alpha[m] * ap[i][m];
                             if jacobi {
-                                z[k][m] = r[k][m] * inv_diag[i];
+                                z[k][m] = r[k][m] * inv_diag[i][m];
                                 rz[m] += r[k][m] * z[k][m];
                             }
                             rr[m] += r[k][m] * r[k][m];

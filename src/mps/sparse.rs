@@ -1,15 +1,23 @@
 //! The sparse matrix of the step's linear systems (PPE, implicit viscosity, the multigrid
 //! levels): compressed rows, assembled and multiplied in a fixed order.
+use super::grid::{Neighbours, entry_index};
 use super::reduce::{MIN_PARALLEL_LEN, PARTICLES_PER_TASK};
 use rayon::prelude::*;
 
 /// Symmetric sparse matrix in compressed rows (diagonal stored separately).
+///
+/// With `component_diagonal` not empty it is one matrix per vector component m (the viscous
+/// stage with mirror symmetry planes): the columns carry the mirror images' plane bits
+/// ([`Neighbours::plane_bits`]), component m's entry is the value negated where the image
+/// negates component m ([`Neighbours::component_sign`]), and its diagonal is
+/// `component_diagonal[i][m]` (`diagonal` is then unused).
 #[derive(Debug, Clone, Default)]
 pub struct CsrMatrix {
     pub diagonal: Vec<f64>,
     pub row_offsets: Vec<usize>,
     pub columns: Vec<u32>,
     pub values: Vec<f64>,
+    pub component_diagonal: Vec<[f64; 3]>,
 }
 
 impl CsrMatrix {
@@ -44,6 +52,7 @@ impl CsrMatrix {
             row_offsets: Vec::with_capacity(n + 1),
             columns: Vec::with_capacity(chunks.iter().map(|c| c.2.len()).sum()),
             values: Vec::with_capacity(chunks.iter().map(|c| c.3.len()).sum()),
+            component_diagonal: Vec::new(),
         };
         m.row_offsets.push(0);
         let mut extras = Vec::with_capacity(n);
@@ -62,6 +71,16 @@ impl CsrMatrix {
         self.diagonal.len()
     }
 
+    /// Component m's diagonal entry of row i.
+    #[inline]
+    pub fn diagonal_of(&self, i: usize, m: usize) -> f64 {
+        if self.component_diagonal.is_empty() {
+            self.diagonal[i]
+        } else {
+            self.component_diagonal[i][m]
+        }
+    }
+
     /// y = A x for M vectors at once (one pass over the matrix), each row gathered by its own
     /// task in a fixed order: every component gets the bits of a single product.
     pub fn multiply<const M: usize>(&self, x: &[[f64; M]], y: &mut [[f64; M]]) {
@@ -75,6 +94,7 @@ impl CsrMatrix {
     /// Row i of A x.
     #[inline]
     pub fn row_value(&self, i: usize, x: &[f64]) -> f64 {
+        debug_assert!(self.component_diagonal.is_empty());
         let range = self.row_offsets[i]..self.row_offsets[i + 1];
         let mut s = self.diagonal[i] * x[i];
         for (&c, &v) in self.columns[range.clone()].iter().zip(&self.values[range]) {
@@ -87,6 +107,16 @@ impl CsrMatrix {
     #[inline]
     pub(crate) fn row_product<const M: usize>(&self, i: usize, x: &[[f64; M]]) -> [f64; M] {
         let range = self.row_offsets[i]..self.row_offsets[i + 1];
+        if !self.component_diagonal.is_empty() {
+            let mut s: [f64; M] = std::array::from_fn(|m| self.component_diagonal[i][m] * x[i][m]);
+            for (&c, &v) in self.columns[range.clone()].iter().zip(&self.values[range]) {
+                let xc = &x[entry_index(c)];
+                for m in 0..M {
+                    s[m] += v * Neighbours::component_sign(c, m) * xc[m];
+                }
+            }
+            return s;
+        }
         let mut s = [0.0; M];
         for m in 0..M {
             s[m] = self.diagonal[i] * x[i][m];

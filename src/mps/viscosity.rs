@@ -4,7 +4,7 @@ use super::grid::{KernelPairs, Neighbours, entry_index};
 use super::kernel::{RefValues, weight};
 use super::operators::{MIN_DET_RATIO, gradient_correction};
 use super::particles::{ParticleKind, Particles, Vector};
-use super::pressure::{Preconditioner, SolveReport, solve_pcg, solve_pcg_many};
+use super::pressure::{Preconditioner, SolveReport, solve_pcg_many};
 use super::reduce::PARTICLES_PER_TASK;
 use super::rheology::Rheology;
 use super::sparse::CsrMatrix;
@@ -522,39 +522,23 @@ pub fn predict_velocity<const D: usize>(
             std::array::from_fn(|axis| rhs[i][axis] * scale + boundary[axis])
         })
         .collect();
-    let reports: Vec<SolveReport> = if nb.mirror.is_empty() {
-        // All velocity components in one run of side-by-side solves (one matrix pass per
-        // product).
-        solve_pcg_many(
-            &matrix,
-            &b,
-            &mut x,
-            settings.tolerance,
-            settings.max_iterations,
-            Preconditioner::Jacobi,
-        )
-        .to_vec()
+    // All velocity components in one run of side-by-side solves (one matrix pass per
+    // product); with symmetry planes each component has its own signs and diagonal.
+    let matrix = if nb.mirror.is_empty() {
+        matrix
     } else {
-        (0..D)
-            .map(|axis| {
-                let component = Neighbours::component_matrix(&matrix, axis, |k| extra[k].2[axis]);
-                let b: Vec<f64> = b.iter().map(|v| v[axis]).collect();
-                let mut xa: Vec<f64> = x.iter().map(|v| v[axis]).collect();
-                let report = solve_pcg(
-                    &component,
-                    &b,
-                    &mut xa,
-                    settings.tolerance,
-                    settings.max_iterations,
-                    Preconditioner::Jacobi,
-                );
-                for (v, xa) in x.iter_mut().zip(xa) {
-                    v[axis] = xa;
-                }
-                report
-            })
-            .collect()
+        Neighbours::component_matrices(matrix, |k| {
+            std::array::from_fn(|m| if m < D { extra[k].2[m] } else { 0.0 })
+        })
     };
+    let reports = solve_pcg_many(
+        &matrix,
+        &b,
+        &mut x,
+        settings.tolerance,
+        settings.max_iterations,
+        Preconditioner::Jacobi,
+    );
     for report in reports {
         solve.iterations += report.iterations;
         // As f64::max, but a NaN (a non-finite system) is kept rather than dropped.
