@@ -114,7 +114,7 @@ impl Neighbours {
     }
 
     /// The plane bits of entry `e` in place (0 for a plain entry), to ride along a matrix
-    /// column index until [`Neighbours::component_matrix`] takes them out.
+    /// column index of the viscous matrix ([`CsrMatrix::component_diagonal`]).
     #[inline]
     pub fn plane_bits(e: u32) -> u32 {
         e & !INDEX_MASK

@@ -453,8 +453,9 @@ pub fn predict_velocity<const D: usize>(
     // Row i: (s_i + sum_j c_ij) u_i - sum_fluid c_ij u_j = s_i rhs_i + sum_walls c_ij u_j.
     // A mirror image carries its source's velocity with the plane's normal component
     // negated, so with symmetry planes each component has its own matrix: an image's column
-    // enters with that sign (its plane bits ride in the column's top bits until the split
-    // below), and i's own image, u_i' - u_i = (sign - 1) u_i, on the diagonal only.
+    // enters with that sign (its plane bits ride in the column's top bits, see
+    // `CsrMatrix::component_diagonal`), and i's own image, u_i' - u_i = (sign - 1) u_i, on
+    // the diagonal only.
     let nb = &pairs.lap;
     let (matrix, extra) = CsrMatrix::assemble(rows.len(), |k, columns, values| {
         let i = rows[k];
