@@ -177,8 +177,7 @@ impl Experiment for Slump {
         let l0 = m.spacing_m;
         // Fluid lifted above the cone's height (stuck to its wall) is not part of the pancake.
         let z_max = self.cone_height_m;
-        let all_radii = spread_radii_m(particles, l0, z_max);
-        let radii = self.sectors(&all_radii);
+        let (radii, on_plate) = self.spread_and_count(particles, l0);
         let mean = radii.iter().sum::<f64>() / radii.len() as f64;
         let min = radii.iter().copied().fold(f64::INFINITY, f64::min);
         let max = radii.iter().copied().fold(0.0, f64::max);
@@ -193,10 +192,6 @@ impl Experiment for Slump {
         let tau = yield_stress_pa(&m.fluid);
         if tau > 0.0 {
             let (rho, g) = (m.fluid.density_kg_m3(), m.gravity_m_s2);
-            let on_plate = (0..particles.len())
-                .filter(|&i| on_plate(particles, i, z_max))
-                .count()
-                * self.copies();
             out.insert("fluid_on_plate_count".into(), on_plate as f64);
             let volume = on_plate as f64 * cell_volume(l0, D);
             let radius = closed_form_radius_m(rho, g, volume, tau);
@@ -288,13 +283,8 @@ impl Slump {
         }
         let (l0, rho, g) = (m.spacing_m, m.fluid.density_kg_m3(), m.gravity_m_s2);
         let z_max = self.cone_height_m;
-        let all_radii = spread_radii_m(particles, l0, z_max);
-        let radii = self.sectors(&all_radii);
+        let (radii, count) = self.spread_and_count(particles, l0);
         let radius_m = radii.iter().sum::<f64>() / radii.len() as f64;
-        let count = (0..particles.len())
-            .filter(|&i| on_plate(particles, i, z_max))
-            .count()
-            * self.copies();
         let volume = count as f64 * cell_volume(l0, 3);
         let closed_form_radius_m = closed_form_radius_m(rho, g, volume, tau);
         let points = (0..)
@@ -374,18 +364,23 @@ impl SlumpProfile {
 }
 
 impl Slump {
-    /// How many copies of the simulated part make the whole slump (4 for a quarter).
-    pub fn copies(&self) -> usize {
-        if self.quarter_domain { 4 } else { 1 }
-    }
-
-    /// The sectors of `radii` (see [`spread_radii_m`]) that the simulated part covers: the
-    /// two octants of the first quadrant for a quarter, all eight else.
-    pub fn sectors<'a>(&self, radii: &'a [f64; SECTORS]) -> &'a [f64] {
+    /// The spread radius of each sector the simulated part covers (see [`spread_radii_m`]:
+    /// for a quarter the two octants of the first quadrant, else all eight) and the count of
+    /// concrete particles on the plate of the whole slump (four times the quarter's).
+    pub fn spread_and_count<const D: usize>(
+        &self,
+        particles: &Particles<D>,
+        spacing_m: f64,
+    ) -> (Vec<f64>, usize) {
+        let z_max = self.cone_height_m;
+        let radii = spread_radii_m(particles, spacing_m, z_max);
+        let count = (0..particles.len())
+            .filter(|&i| on_plate(particles, i, z_max))
+            .count();
         if self.quarter_domain {
-            &radii[..2]
+            (radii[..2].to_vec(), 4 * count)
         } else {
-            radii
+            (radii.to_vec(), count)
         }
     }
 

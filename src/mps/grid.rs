@@ -1,6 +1,5 @@
 //! Cell-list neighbour search in O(N) with a fixed neighbour order.
 use super::particles::Vector;
-use super::sparse::CsrMatrix;
 use rayon::prelude::*;
 
 /// Particles per parallel work item when building lists: a constant, so the split (and the
@@ -40,6 +39,20 @@ impl MirrorPlanes {
     pub fn is_empty(&self) -> bool {
         self.axes == 0
     }
+
+    /// The axes whose bit is set in `planes` (an entry's plane bits, or `axes`).
+    pub fn axes_of<const D: usize>(planes: u32) -> impl Iterator<Item = usize> {
+        (0..D).filter(move |a| planes >> a & 1 == 1)
+    }
+
+    /// `x` reflected across the planes in `planes`.
+    #[inline]
+    pub fn reflect_point<const D: usize>(&self, planes: u32, mut x: Vector<D>) -> Vector<D> {
+        for a in Self::axes_of::<D>(planes) {
+            x[a] = 2.0 * self.position_m[a] - x[a];
+        }
+        x
+    }
 }
 
 /// Neighbour lists in compressed rows: the neighbours of i are
@@ -72,15 +85,12 @@ impl Neighbours {
         e: u32,
     ) -> Vector<D> {
         let j = entry_index(e);
-        let mut r = positions[j] - positions[i];
         let planes = e >> MIRROR_SHIFT;
-        if planes != 0 {
-            for a in 0..D {
-                if planes >> a & 1 == 1 {
-                    r[a] = (2.0 * self.mirror.position_m[a] - positions[j][a]) - positions[i][a];
-                }
-            }
-        }
+        let mut r = if planes == 0 {
+            positions[j] - positions[i]
+        } else {
+            self.mirror.reflect_point(planes, positions[j]) - positions[i]
+        };
         if let Some(period) = self.period_x_m {
             r[0] -= period * (r[0] / period).round();
         }
@@ -91,13 +101,8 @@ impl Neighbours {
     /// normal components negated (unchanged for a plain entry).
     #[inline]
     pub fn reflect<const D: usize>(&self, e: u32, mut v: Vector<D>) -> Vector<D> {
-        let planes = e >> MIRROR_SHIFT;
-        if planes != 0 {
-            for a in 0..D {
-                if planes >> a & 1 == 1 {
-                    v[a] = -v[a];
-                }
-            }
+        for a in MirrorPlanes::axes_of::<D>(e >> MIRROR_SHIFT) {
+            v[a] = -v[a];
         }
         v
     }
@@ -114,26 +119,10 @@ impl Neighbours {
     }
 
     /// The plane bits of entry `e` in place (0 for a plain entry), to ride along a matrix
-    /// column index of the viscous matrix ([`CsrMatrix::component_diagonal`]).
+    /// column index of the viscous matrix (`CsrMatrix::component_diagonal`).
     #[inline]
     pub fn plane_bits(e: u32) -> u32 {
         e & !INDEX_MASK
-    }
-
-    /// `matrix`, assembled with plane bits in its columns ([`Neighbours::plane_bits`]), as
-    /// one matrix per velocity component ([`CsrMatrix::component_diagonal`]): row k's
-    /// diagonal for component m gains `own_image(k)[m]`.
-    pub fn component_matrices(
-        mut matrix: CsrMatrix,
-        own_image: impl Fn(usize) -> [f64; 3],
-    ) -> CsrMatrix {
-        matrix.component_diagonal = (0..matrix.rows())
-            .map(|k| {
-                let own = own_image(k);
-                std::array::from_fn(|m| matrix.diagonal[k] + own[m])
-            })
-            .collect();
-        matrix
     }
 
     /// Whether entry `e` is i's own mirror image.
@@ -350,15 +339,10 @@ impl Neighbours {
                 continue;
             }
             for (j, x) in positions.iter().enumerate() {
-                let near = (0..D)
-                    .filter(|a| planes >> a & 1 == 1)
+                let near = MirrorPlanes::axes_of::<D>(planes)
                     .all(|a| x[a] - mirror.position_m[a] < cutoff_m);
                 if near && active(j) {
-                    let mut image = *x;
-                    for a in (0..D).filter(|a| planes >> a & 1 == 1) {
-                        image[a] = 2.0 * mirror.position_m[a] - x[a];
-                    }
-                    extended.push(image);
+                    extended.push(mirror.reflect_point(planes, *x));
                     images.push(j as u32 | planes << MIRROR_SHIFT);
                 }
             }

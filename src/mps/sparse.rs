@@ -71,6 +71,19 @@ impl CsrMatrix {
         self.diagonal.len()
     }
 
+    /// This matrix, assembled with plane bits in its columns ([`Neighbours::plane_bits`]), as
+    /// one matrix per vector component (see `component_diagonal`): row k's diagonal for
+    /// component m gains `own_image(k)[m]`.
+    pub fn with_component_diagonals(mut self, own_image: impl Fn(usize) -> [f64; 3]) -> Self {
+        self.component_diagonal = (0..self.rows())
+            .map(|k| {
+                let own = own_image(k);
+                std::array::from_fn(|m| self.diagonal[k] + own[m])
+            })
+            .collect();
+        self
+    }
+
     /// Component m's diagonal entry of row i.
     #[inline]
     pub fn diagonal_of(&self, i: usize, m: usize) -> f64 {

@@ -528,7 +528,7 @@ pub fn predict_velocity<const D: usize>(
     let matrix = if nb.mirror.is_empty() {
         matrix
     } else {
-        Neighbours::component_matrices(matrix, |k| {
+        matrix.with_component_diagonals(|k| {
             std::array::from_fn(|m| if m < D { extra[k].2[m] } else { 0.0 })
         })
     };

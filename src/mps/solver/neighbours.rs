@@ -2,7 +2,7 @@
 //! seam.
 
 use super::{LIST_SKIN, Solver};
-use crate::mps::grid::{KernelPairs, Neighbours};
+use crate::mps::grid::{KernelPairs, MirrorPlanes, Neighbours};
 use crate::mps::particles::ParticleKind;
 use crate::mps::reduce::max_by;
 use std::time::Instant;
@@ -70,7 +70,7 @@ impl<const D: usize> Solver<D> {
             if p.kind[i] != ParticleKind::Fluid {
                 continue;
             }
-            for a in (0..D).filter(|a| planes.axes >> a & 1 == 1) {
+            for a in MirrorPlanes::axes_of::<D>(planes.axes) {
                 let plane = planes.position_m[a];
                 if p.position_m[i][a] < plane {
                     p.position_m[i][a] = 2.0 * plane - p.position_m[i][a];
