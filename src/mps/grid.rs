@@ -85,12 +85,11 @@ impl Neighbours {
         e: u32,
     ) -> Vector<D> {
         let j = entry_index(e);
+        let mut r = positions[j] - positions[i];
         let planes = e >> MIRROR_SHIFT;
-        let mut r = if planes == 0 {
-            positions[j] - positions[i]
-        } else {
-            self.mirror.reflect_point(planes, positions[j]) - positions[i]
-        };
+        if planes != 0 {
+            r = self.mirror.reflect_point(planes, positions[j]) - positions[i];
+        }
         if let Some(period) = self.period_x_m {
             r[0] -= period * (r[0] / period).round();
         }
@@ -101,8 +100,12 @@ impl Neighbours {
     /// normal components negated (unchanged for a plain entry).
     #[inline]
     pub fn reflect<const D: usize>(&self, e: u32, mut v: Vector<D>) -> Vector<D> {
-        for a in MirrorPlanes::axes_of::<D>(e >> MIRROR_SHIFT) {
-            v[a] = -v[a];
+        // A plain entry returns at once: this is read for every pair of the hot loops.
+        let planes = e >> MIRROR_SHIFT;
+        if planes != 0 {
+            for a in MirrorPlanes::axes_of::<D>(planes) {
+                v[a] = -v[a];
+            }
         }
         v
     }
