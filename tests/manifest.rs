@@ -736,11 +736,12 @@ fn invalid_values_are_named_and_located() {
             "mps.exact_projection=false",
             "mps.particle_shifting=0",
             "mps.particle_shifting_limit=0.2",
+            "mps.pressure_floor_pa=0",
         ],
     );
     assert_eq!(plain.hash_hex, off.hash_hex);
     for on in [
-        "mps.particle_shifting=40",
+        "mps.pressure_floor_pa=-101325",
         "mps.surface_depth=0.5",
         "mps.corrected_strain_rate=true",
         "mps.wall_surface_no_slip=true",
@@ -752,6 +753,18 @@ fn invalid_values_are_named_and_located() {
     }
     let e = err_with(MINIMAL, &["mps.surface_depth=1.5"]);
     assert_invalid(&e, "mps.surface_depth", None, &["[0, 1]", "1.5"]);
+    let e = err_with(MINIMAL, &["mps.pressure_floor_pa=-2e5"]);
+    assert_invalid(
+        &e,
+        "mps.pressure_floor_pa",
+        None,
+        &["[-101325, 0]", "-200000"],
+    );
+    let e = err_with(MINIMAL, &["mps.pressure_floor_pa=10"]);
+    assert_invalid(&e, "mps.pressure_floor_pa", None, &["[-101325, 0]", "10"]);
+    // The floor is read by the standard scheme too.
+    let standard_floor = ok_with(MINIMAL, &["mps.pressure_floor_pa=-1000"]);
+    assert_ne!(ok_with(MINIMAL, &[]).hash_hex, standard_floor.hash_hex);
     // The shifting's limit is part of the experiment once shifting is on.
     let shifting = [
         "mps.pressure_scheme=incremental",
@@ -1077,7 +1090,8 @@ fn slip_lengths_of_the_rod_and_the_cone_are_part_of_the_experiment_only_when_set
     ] {
         let key = field.trim_start_matches("scene.");
         let path = common::experiment(file);
-        let plain = experiment::load(&path, &[]).unwrap();
+        // (The shipped rodding sets its rod's slip length: null takes it out.)
+        let plain = experiment::load(&path, &[format!("{field}=null")]).unwrap();
         // Absent: the canonical form (and so every hash and file written before) is unchanged.
         assert!(!plain.canonical.contains(key), "{}", plain.canonical);
         let set = experiment::load(&path, &[format!("{field}=0.002")]).unwrap();

@@ -10,7 +10,7 @@
 //! `mps.compression_relaxation`, `mps.pair_stabilisation`, `mps.wall_support` and
 //! `mps.pressure_regularisation` (with `mps.regularisation_radius`), `mps.surface_depth` and
 //! `mps.particle_shifting` (with `mps.particle_shifting_limit`) at 0 (and under the standard
-//! scheme), `mps.corrected_strain_rate`,
+//! scheme), `mps.pressure_floor_pa` at 0, `mps.corrected_strain_rate`,
 //! `mps.wall_surface_no_slip`, `mps.quadratic_strain_rate` and `mps.exact_projection` (also
 //! under the standard scheme) false, `stop.rest_*` without `stop.rest_metric`, null
 //! `mps.wall_collision_*`, `time.dt_min_s`, `stop.max_ghost_particles` and the rod's, the
@@ -76,6 +76,10 @@ pub fn canonical_text<S: SceneSection>(manifest: &Manifest<S>) -> String {
             if v == 0.0 || manifest.mps.pressure_scheme == PressureSchemeName::Standard {
                 mps.remove(key);
             }
+        }
+        // 0 is the clip of negative pressure before the field existed (both schemes read it).
+        if manifest.mps.pressure_floor_pa == 0.0 {
+            mps.remove("pressure_floor_pa");
         }
         // The radius is read only with the regularisation on, the limit only with shifting.
         if !mps.contains_key("pressure_regularisation") {

@@ -242,6 +242,12 @@ pub struct Mps {
     /// Unused by `standard`.
     #[serde(default)]
     pub surface_depth: f64,
+    /// The lowest (gauge) pressure a particle may carry, in Pa, in [-101325, 0]: the PPE's
+    /// solution (standard) or the carried pressure (incremental) is clipped to it. 0 = the
+    /// usual MPS clip of negative pressure; below 0 the concrete can pull (suction), down to
+    /// vacuum at -101325 Pa. Left out of the canonical form while 0.
+    #[serde(default)]
+    pub pressure_floor_pa: f64,
     /// Incremental scheme, dimensionless A of the particle shifting (Fickian, Lind et al.
     /// 2012, with a diffusion coefficient A l0^2 sqrt(Pi) that follows the local shear rate):
     /// after the correction each fluid particle is shifted by
@@ -344,6 +350,7 @@ impl Default for Mps {
             pressure_regularisation: 0.0,
             regularisation_radius: default_regularisation_radius(),
             surface_depth: 0.0,
+            pressure_floor_pa: 0.0,
             particle_shifting: 0.0,
             particle_shifting_limit: default_particle_shifting_limit(),
             corrected_strain_rate: false,

@@ -206,6 +206,11 @@ pub fn check<S: SceneSection>(m: &Manifest<S>) -> Vec<Issue> {
         between(0.0, true, 1.0, true),
     );
     c.real(
+        "mps.pressure_floor_pa",
+        p.pressure_floor_pa,
+        between(-101_325.0, true, 0.0, true),
+    );
+    c.real(
         "mps.particle_shifting",
         p.particle_shifting,
         between(0.0, true, 1000.0, true),

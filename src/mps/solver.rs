@@ -78,6 +78,9 @@ pub struct SolverConfig<const D: usize> {
     /// Incremental scheme: a free-surface particle holds rho |g| surface_depth_m
     /// max(-n . g/|g|, 0) (0 = p = 0 at surface particles).
     pub surface_depth_m: f64,
+    /// The lowest pressure a particle may carry (Pa, <= 0): the clip of the PPE's solution
+    /// (standard) and of the carried pressure (incremental). 0: negative pressure clipped.
+    pub pressure_floor_pa: f64,
     /// Incremental scheme: A of the particle shifting dr = -A l0^2 sqrt(Pi) dt (d/n0)
     /// sum_j r_ij w(r_ij)/r_ij^2, kept to the tangent plane where a particle's stencil is
     /// incomplete (0 = off). Idle at rest and in rigid motion (Pi = 0).

@@ -209,6 +209,7 @@ pub fn run_info(path: &Path, size_bytes: u64, run: &RunFile) -> RunInfo {
                 "pressure_regularisation",
                 "regularisation_radius",
                 "surface_depth",
+                "pressure_floor_pa",
                 "particle_shifting",
                 "particle_shifting_limit",
                 "corrected_strain_rate",

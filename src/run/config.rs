@@ -74,6 +74,7 @@ pub fn solver_config<const D: usize>(m: &Manifest, scene: &Scene<D>) -> SolverCo
         pressure_regularisation: m.mps.pressure_regularisation,
         regularisation_radius_m: m.mps.regularisation_radius * l0,
         surface_depth_m: m.mps.surface_depth * l0,
+        pressure_floor_pa: m.mps.pressure_floor_pa,
         particle_shifting: m.mps.particle_shifting,
         particle_shifting_limit_m: m.mps.particle_shifting_limit * l0,
         // Validation refuses both on.

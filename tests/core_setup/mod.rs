@@ -63,6 +63,7 @@ pub fn config<const D: usize>(
         pressure_regularisation: 0.0,
         regularisation_radius_m: 1.5 * l0,
         surface_depth_m: 0.0,
+        pressure_floor_pa: 0.0,
         particle_shifting: 0.0,
         particle_shifting_limit_m: 0.05 * l0,
         strain_rate_gradient: mps_runner::mps::viscosity::StrainRateGradient::Plain,

@@ -220,7 +220,7 @@ impl<const D: usize> Solver<D> {
         self.timing.ppe_iterations += u64::from(ppe.iterations);
         self.check_pressure_solve(&ppe)?;
 
-        // New carried pressure and the increment actually applied (after the clip at 0).
+        // New carried pressure and the increment actually applied (after the clip at the pressure floor).
         let p = &self.particles;
         // Walls carry no pressure of their own (the carried gradient mirrors the fluid's); a
         // supporting wall's increment acts in this correction only.
@@ -228,7 +228,7 @@ impl<const D: usize> Solver<D> {
             .map(|i| match unknown_of[i] {
                 u32::MAX => surface_value[i],
                 _ if !is_fluid(i) => 0.0,
-                k => (p.pressure_pa[i] + solution[k as usize]).max(0.0),
+                k => (p.pressure_pa[i] + solution[k as usize]).max(self.config.pressure_floor_pa),
             })
             .collect();
         let increment: Vec<f64> = (0..p.len())

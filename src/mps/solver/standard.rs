@@ -120,7 +120,8 @@ impl<const D: usize> Solver<D> {
 
     /// PPE (Koshizuka & Oka): -<lap p>_i + rho kappa p_i / dt^2 = source_i for fluid and wall
     /// particles not on the surface; p = 0 on the surface (Dirichlet).
-    /// Assembled once in CSR and solved by Jacobi-PCG; negative pressure is clipped to 0.
+    /// Assembled once in CSR and solved by Jacobi-PCG; the pressure is clipped at
+    /// `pressure_floor_pa` (0: no negative pressure).
     /// Returns the solver's report and the seconds spent in the CG solve.
     pub(super) fn solve_pressure(
         &mut self,
@@ -159,10 +160,11 @@ impl<const D: usize> Solver<D> {
         let solve_started = Instant::now();
         let report = self.solve_ppe_system(&matrix, &rhs, &mut solution, &rows);
         let solve_s = solve_started.elapsed().as_secs_f64();
+        let floor_pa = self.config.pressure_floor_pa;
         let pressure = &mut self.particles.pressure_pa;
         pressure.iter_mut().for_each(|v| *v = 0.0);
         for (k, &i) in rows.iter().enumerate() {
-            pressure[i] = solution[k].max(0.0);
+            pressure[i] = solution[k].max(floor_pa);
         }
         (report, solve_s)
     }
