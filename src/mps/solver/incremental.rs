@@ -220,7 +220,8 @@ impl<const D: usize> Solver<D> {
         self.timing.ppe_iterations += u64::from(ppe.iterations);
         self.check_pressure_solve(&ppe)?;
 
-        // New carried pressure and the increment actually applied (after the clip at the pressure floor).
+        // New carried pressure and the increment actually applied (after the clip at
+        // `pressure_floor_pa`).
         let p = &self.particles;
         // Walls carry no pressure of their own (the carried gradient mirrors the fluid's); a
         // supporting wall's increment acts in this correction only.
