@@ -202,7 +202,7 @@ pub fn run_info(path: &Path, size_bytes: u64, run: &RunFile) -> RunInfo {
                 .and_then(|v| v.as_str())
                 .unwrap_or("standard")
                 .to_string();
-            // The stabilisers are in the canonical form only when on.
+            // The scheme's switches (stabilisers, floor, ...) are in the canonical form only when on.
             for key in [
                 "pair_stabilisation",
                 "wall_support",
