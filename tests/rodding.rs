@@ -8,11 +8,9 @@ use mps_runner::mps::ParticleKind;
 use mps_runner::record::read_run;
 use mps_runner::report;
 
-/// A coarse run: 10 mm (the rod 20 mm: two spacings), three strokes at the default speed,
-/// 0.3 s settling after them.
+/// A coarse run (with `common::rodding_10_mm`): three strokes at the default speed, 0.3 s
+/// settling after them.
 const COARSE: &[&str] = &[
-    "spacing_m=0.01",
-    "scene.rod_width_m=0.02",
     "scene.strokes=3",
     "time.end_s=8.1",
     "output.checkpoint_interval_s=0.5",
@@ -102,7 +100,7 @@ fn the_mixing_index_is_zero_for_layers_and_one_for_thirds() {
 #[test]
 fn strokes_mix_the_layers_and_lose_nothing() {
     let dir = tempfile::tempdir().unwrap();
-    let resolved = common::resolve("rodding_2d.yaml", COARSE);
+    let resolved = common::rodding_10_mm(COARSE);
     let m = &resolved.manifest;
     let r = rodding(&resolved);
     let result = common::run_completed(&resolved, dir.path(), 2);
@@ -374,15 +372,8 @@ const STANDARD: &[&str] = &[
 fn the_quiet_set_holds_the_concrete_still_in_the_form() {
     let dir = tempfile::tempdir().unwrap();
     let rms_displacement_m = |sets: &[&str]| -> f64 {
-        let mut all = vec![
-            "spacing_m=0.01",
-            "scene.rod_width_m=0.02",
-            "scene.strokes=1",
-            "scene.start_s=50",
-            "time.end_s=3.0",
-        ];
-        all.extend_from_slice(sets);
-        let resolved = common::resolve("rodding_2d.yaml", &all);
+        let parked = ["scene.strokes=1", "scene.start_s=50", "time.end_s=3.0"];
+        let resolved = common::rodding_10_mm(&[&parked, sets].concat());
         let result = common::run_completed(&resolved, dir.path(), 2);
         let run = read_run(&result.path).unwrap();
         let (first, last) = (&run.states[0], run.states.last().unwrap());
@@ -416,19 +407,12 @@ fn the_quiet_set_holds_the_concrete_still_in_the_form() {
 fn the_pressure_floor_lets_the_concrete_pull_behind_the_rod() {
     let dir = tempfile::tempdir().unwrap();
     let lowest_pa = |floor: &str| -> (f64, usize) {
-        let resolved = common::resolve(
-            "rodding_2d.yaml",
-            &[
-                "spacing_m=0.01",
-                "scene.rod_width_m=0.02",
-                "scene.strokes=1",
-                "time.end_s=2.8",
-                "output.checkpoint_interval_s=0.1",
-                STANDARD[0],
-                STANDARD[1],
-                floor,
-            ],
-        );
+        let stroke = [
+            "scene.strokes=1",
+            "time.end_s=2.8",
+            "output.checkpoint_interval_s=0.1",
+        ];
+        let resolved = common::rodding_10_mm(&[&stroke, STANDARD, &[floor]].concat());
         let result = common::run_completed(&resolved, dir.path(), 2);
         let run = read_run(&result.path).unwrap();
         let mut lowest = f64::INFINITY;

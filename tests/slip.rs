@@ -170,15 +170,12 @@ fn zero_slip_length_is_the_no_slip_condition_at_the_surface() {
 fn a_free_slipping_rod_comes_out_of_the_concrete_clean() {
     let dir = tempfile::tempdir().unwrap();
     let lifted = |sets: &[&str]| -> f64 {
-        let mut all = vec![
-            "spacing_m=0.01",
-            "scene.rod_width_m=0.02",
+        let stroke = [
             "scene.strokes=1",
             "time.end_s=3.0",
             "output.checkpoint_interval_s=1.0",
         ];
-        all.extend_from_slice(sets);
-        let resolved = common::resolve("rodding_2d.yaml", &all);
+        let resolved = common::rodding_10_mm(&[&stroke, sets].concat());
         let result = common::run_completed(&resolved, dir.path(), 2);
         // Run on 2 threads, replayed on 1: the same bits (the slip walls' frames and
         // factors are per particle, in a fixed order).

@@ -31,6 +31,13 @@ pub fn resolve(name: &str, sets: &[&str]) -> Resolved {
     experiment::load(&experiment(name), &sets).expect("manifest")
 }
 
+/// `rodding_2d.yaml` at 10 mm, its rod 20 mm (two spacings, the narrowest it may be), with
+/// `sets` after: the coarse rodding of the tests.
+pub fn rodding_10_mm(sets: &[&str]) -> Resolved {
+    let all = [&["spacing_m=0.01", "scene.rod_width_m=0.02"], sets].concat();
+    resolve("rodding_2d.yaml", &all)
+}
+
 pub fn run_in(resolved: &Resolved, out_dir: &Path, threads: usize) -> RunResult {
     run(
         resolved,
