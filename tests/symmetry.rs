@@ -149,3 +149,112 @@ fn quarter_with_the_exact_projection_is_refused() {
     .to_string();
     assert!(err.contains("scene.quarter_domain"), "{err}");
 }
+
+/// Fluid positions of a run's last checkpoint.
+fn last_fluid(path: &std::path::Path) -> Vec<[f64; 3]> {
+    let run = read_run(path).unwrap();
+    let last = run.states.last().unwrap();
+    (0..last.kind.len())
+        .filter(|&i| last.kind[i] == 0)
+        .map(|i| std::array::from_fn(|a| last.position_m[3 * i + a]))
+        .collect()
+}
+
+/// The L-B box's half (`scene.half_domain`: y >= W/2 beside the plane through the inlet's
+/// axis and the spheres' centres) is the whole box cut in two, while it pours: the inlet's
+/// half-disc pours half the particles, each of them on the path of its twin in the whole.
+/// Poured particles have no starting cell to pair them by, so each particle of the half is
+/// paired with the nearest of the whole's. 25 mm (W is 8 spacings), a 0.1 m inlet (12
+/// points, 6 in the half) at 1 m/s, to 0.25 s: the jet falls 0.45 m beside the plane (every
+/// particle of the half next to it meets images) and hits the floor at 0.22 s. Both solves
+/// to 1e-12: in free fall the two runs stay 1.3e-12 m apart (the solves' tolerance, as in
+/// the quarter slump); the impact then amplifies any difference about 30-fold in 0.03 s and
+/// then 100-fold every 0.1 s (a round-off twin of the whole, g changed in its 13th digit,
+/// too), so a longer run compares chaos, not the plane.
+#[test]
+fn half_lb_box_is_the_whole_under_the_standard_scheme() {
+    let run = |half: bool| {
+        let mut all = vec![
+            "spacing_m=0.025",
+            "scene.inlet_diameter_m=0.1",
+            "time.end_s=0.25",
+            "mps.ppe_tolerance=1e-12",
+            "mps.viscosity_tolerance=1e-12",
+        ];
+        if half {
+            all.push("scene.half_domain=true");
+        }
+        let resolved = common::resolve("lb_box_3d.yaml", &all);
+        let dir = tempfile::tempdir().unwrap();
+        let result = common::run_in(&resolved, dir.path(), 2);
+        assert_eq!(
+            result.outcome,
+            Outcome::Completed,
+            "{}",
+            result.summary.reason
+        );
+        (last_fluid(&result.path), result.summary.metrics, dir)
+    };
+    let (whole, whole_metrics, _keep_whole) = run(false);
+    let (half, half_metrics, _keep_half) = run(true);
+    let plane_m = 0.1;
+    assert_eq!(half.len(), 60);
+    assert_eq!(2 * half.len(), whole.len());
+    let whole_side: Vec<&[f64; 3]> = whole.iter().filter(|x| x[1] > plane_m).collect();
+    assert_eq!(whole_side.len(), half.len());
+    let mut worst = 0.0f64;
+    for x in &half {
+        assert!(x[1] > plane_m, "{x:?} crossed the plane");
+        let nearest = whole_side
+            .iter()
+            .map(|y| (0..3).map(|a| (x[a] - y[a]).abs()).fold(0.0, f64::max))
+            .fold(f64::INFINITY, f64::min);
+        worst = worst.max(nearest);
+    }
+    // MEASURED: 2.8e-11 m. A plane that is not a mirror (no images: a free surface) moves
+    // the particles beside it by millimetres within a few steps.
+    assert!(worst < 1e-9, "half and whole apart by {worst} m");
+    for name in ["poured_volume_m3", "surface_height_x50_m"] {
+        let (h, w) = (half_metrics[name], whole_metrics[name]);
+        assert!(
+            (h - w).abs() <= 1e-9 * w.abs(),
+            "{name}: half {h}, whole {w}"
+        );
+    }
+}
+
+/// Spheres off the plane need a mirrored twin, and W an even number of spacings: the
+/// manifest says so, naming the field.
+#[test]
+fn half_lb_box_needs_a_symmetric_box() {
+    let load = |path: &std::path::Path, sets: &[&str]| {
+        let mut all: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
+        all.push("scene.half_domain=true".into());
+        mps_runner::experiment::load(path, &all)
+            .map(|_| ())
+            .map_err(|e| e.to_string())
+    };
+    load(&common::experiment("lb_box_3d.yaml"), &[]).unwrap();
+    let odd = load(&common::experiment("lb_box_3d.yaml"), &["spacing_m=0.008"]).unwrap_err();
+    assert!(
+        odd.contains("scene.half_domain") && odd.contains("25"),
+        "{odd}"
+    );
+    // The first sphere moved off the plane (80 mm spheres, so that one fits beside it),
+    // alone and then with its twin.
+    let text = std::fs::read_to_string(common::experiment("lb_box_3d.yaml")).unwrap();
+    let first = "- [0.325, 0.1, 0.075]";
+    assert!(text.contains(first));
+    let dir = tempfile::tempdir().unwrap();
+    let with = |spheres: &str| {
+        let path = dir.path().join("lb.yaml");
+        std::fs::write(&path, text.replace(first, spheres)).unwrap();
+        load(&path, &["scene.sphere_diameter_m=0.08"])
+    };
+    let lone = with("- [0.325, 0.06, 0.075]").unwrap_err();
+    assert!(
+        lone.contains("scene.sphere_centres_m.0") && lone.contains("0.14"),
+        "{lone}"
+    );
+    with("- [0.325, 0.06, 0.075]\n    - [0.325, 0.14, 0.075]").unwrap();
+}

@@ -18,6 +18,7 @@ use super::geometry::lattice::cells;
 use super::geometry::shapes::Shape;
 use super::{Experiment, Manifest, Scene, SurfaceProfile, yield_stress_pa};
 use crate::manifest::validate::{Checker, POSITIVE, fmt_num};
+use crate::mps::grid::MirrorPlanes;
 use crate::mps::particles::cell_volume;
 use crate::mps::{Inlet, ParticleKind, Particles, Vector};
 use serde::{Deserialize, Serialize};
@@ -57,6 +58,10 @@ pub struct LbBox {
     /// Height above the floor up to which `filling_rate` measures the void around the
     /// spheres, in metres.
     pub filling_height_m: f64,
+    /// Simulate the half y >= W/2 beside a mirror symmetry plane through the box's middle
+    /// (the inlet's axis; the spheres must be symmetric about it); metrics are those of the
+    /// whole box.
+    pub half_domain: bool,
 }
 
 impl Default for LbBox {
@@ -79,6 +84,7 @@ impl Default for LbBox {
             sphere_diameter_m: 0.15,
             sphere_centres_m: vec![sphere(0.325), sphere(0.675), sphere(1.025), sphere(1.375)],
             filling_height_m: 0.15,
+            half_domain: false,
         }
     }
 }
@@ -232,8 +238,22 @@ impl Experiment for LbBox {
                 );
             }
         }
+        // The exact projection's gradient rows have no mirror images.
+        if self.half_domain
+            && m.mps.exact_projection
+            && m.mps.pressure_scheme != crate::manifest::PressureSchemeName::Standard
+        {
+            c.fail(
+                "scene.half_domain",
+                "is not available with mps.exact_projection (its gradient rows have no mirror images)"
+                    .into(),
+            );
+        }
         if super::spacing_ok(m) {
             c.lattice_lengths(&dims, m.spacing_m);
+            if self.half_domain {
+                self.check_half_domain(m.spacing_m, c);
+            }
             if c.is_clean()
                 && let Err(message) = self.inlet::<3>(m.spacing_m).validate(m.spacing_m)
             {
@@ -266,6 +286,17 @@ impl Experiment for LbBox {
                 &mut taken,
             );
         }
+        let mut symmetry = MirrorPlanes::default();
+        if self.half_domain {
+            // The whole box is built, then cut at the plane: what stays is the whole's half
+            // y > W/2, and the mirror images stand for the rest.
+            let plane_m = self.mirror_plane_m(l0);
+            particles.retain(|x| x[1] > plane_m);
+            symmetry = MirrorPlanes {
+                axes: 0b010,
+                position_m: [0.0, plane_m, 0.0],
+            };
+        }
         let (domain_min_m, domain_max_m) = self.domain::<D>(m);
         Scene {
             particles,
@@ -275,7 +306,7 @@ impl Experiment for LbBox {
             inlets: vec![self.inlet(l0)],
             gravity_tilt_rad: 0.0,
             periodic_x: None,
-            symmetry: Default::default(),
+            symmetry,
         }
     }
 
@@ -316,7 +347,7 @@ impl Experiment for LbBox {
     ) {
         let l0 = m.spacing_m;
         let g = self.lattice(l0);
-        let volume_m3 = particles.fluid_count() as f64 * cell_volume(l0, D);
+        let volume_m3 = self.copies() * particles.fluid_count() as f64 * cell_volume(l0, D);
         out.insert("poured_volume_m3".into(), volume_m3);
         let front_m = super::front_position_m(particles, l0);
         let distance_m = super::front_past_m(particles, g.gate_x_m, l0);
@@ -373,6 +404,53 @@ impl LbBox {
         }
     }
 
+    /// The mirror plane y = W/2 of `half_domain` must be a cell face of the lattice (W an
+    /// even number of spacings) and every sphere must be its own mirror image or have one.
+    fn check_half_domain(&self, spacing_m: f64, c: &mut Checker) {
+        let n = cells(self.width_m, spacing_m);
+        if n % 2 != 0 {
+            c.fail(
+                "scene.half_domain",
+                format!(
+                    "needs scene.width_m to be an even number of spacings (the mirror plane y = W/2 on a cell face), got {n} spacings of {} m",
+                    fmt_num(spacing_m)
+                ),
+            );
+            return;
+        }
+        let plane_m = self.mirror_plane_m(spacing_m);
+        // A nanometre: far below a spacing, far above the round-off of a written centre.
+        let same = |a: f64, b: f64| (a - b).abs() <= 1e-9;
+        for (k, s) in self.sphere_centres_m.iter().enumerate() {
+            let mirror_y = 2.0 * plane_m - s[1];
+            let mirrored = same(s[1], plane_m)
+                || self.sphere_centres_m.iter().any(|t| {
+                    same(t[0], s[0]) && same(t[1], mirror_y) && same(t[2], s[2])
+                });
+            if !mirrored {
+                c.fail(
+                    &format!("scene.sphere_centres_m.{k}"),
+                    format!(
+                        "with scene.half_domain the spheres must be symmetric about y = {} m (half the lattice's width): centred on it, or with a twin at y = {}",
+                        fmt_num(plane_m),
+                        fmt_num(mirror_y)
+                    ),
+                );
+            }
+        }
+    }
+
+    /// y of the mirror plane of `half_domain`: half the lattice's width.
+    pub fn mirror_plane_m(&self, spacing_m: f64) -> f64 {
+        0.5 * self.lattice(spacing_m).width_m
+    }
+
+    /// How many copies of the simulated part the whole box holds (2 for `half_domain`):
+    /// counts of concrete are multiplied by it.
+    pub fn copies(&self) -> f64 {
+        if self.half_domain { 2.0 } else { 1.0 }
+    }
+
     fn parts<const D: usize>(
         &self,
         spacing_m: f64,
@@ -409,7 +487,9 @@ impl LbBox {
             direction: Vector::<D>::from_fn(|a, _| if a == D - 1 { -1.0 } else { 0.0 }),
             radius_m: 0.5 * self.inlet_diameter_m,
             speed_m_s: self.inlet_speed_m_s,
-            volume_m3: self.pour_volume_m3,
+            // The half beside the mirror plane pours half (the solver keeps the points of
+            // the opening on the domain's side).
+            volume_m3: self.pour_volume_m3 / self.copies(),
             start_s: 0.0,
             tag: 0,
             clearance_m: 0.9 * spacing_m,
@@ -464,7 +544,7 @@ impl LbBox {
                     && (0..D).all(|a| x[a] >= lo[a] && x[a] <= hi[a])
             })
             .count();
-        inside as f64 * cell_volume(spacing_m, D) / self.void_volume_m3(spacing_m)
+        self.copies() * inside as f64 * cell_volume(spacing_m, D) / self.void_volume_m3(spacing_m)
     }
 }
 
@@ -595,6 +675,31 @@ mod tests {
         assert!(l > 1.1 && l < 1.35, "{l}");
         let big = heap_length_m(k, w, 0.026);
         assert!(big > l);
+    }
+
+    /// The half's counts stand for the whole's: a state in the half and the same state with
+    /// its mirror image give the same filling rate.
+    #[test]
+    fn half_domain_counts_its_mirror() {
+        let l0 = 0.01;
+        let half = LbBox {
+            half_domain: true,
+            ..LbBox::default()
+        };
+        let plane_m = half.mirror_plane_m(l0);
+        assert_eq!(plane_m, 0.1);
+        let mut one_side = Particles::<3>::default();
+        let mut both = Particles::<3>::default();
+        for k in 0..37 {
+            let x = Vector::<3>::new(0.26 + 0.01 * k as f64, 0.105 + 0.002 * k as f64, 0.01);
+            one_side.push(x, ParticleKind::Fluid);
+            both.push(x, ParticleKind::Fluid);
+            both.push(Vector::<3>::new(x[0], 2.0 * plane_m - x[1], x[2]), ParticleKind::Fluid);
+        }
+        let whole = LbBox::default();
+        let (h, w) = (half.filling_rate(&one_side, l0), whole.filling_rate(&both, l0));
+        assert!(h > 0.0 && (h - w).abs() <= 1e-15 * w, "half {h}, whole {w}");
+        assert!((whole.filling_rate(&one_side, l0) - 0.5 * w).abs() <= 1e-15 * w);
     }
 
     #[test]

@@ -120,11 +120,14 @@ pub fn canonical_text<S: SceneSection>(manifest: &Manifest<S>) -> String {
             map.remove(key);
         }
     }
-    // The whole slump is the scene as it was before the quarter existed.
-    if let Some(scene) = value.get_mut("scene").and_then(Value::as_object_mut)
-        && scene.get("quarter_domain") == Some(&Value::Bool(false))
-    {
-        scene.remove("quarter_domain");
+    // The whole slump and L-B box are the scenes as they were before the quarter and the
+    // half existed.
+    if let Some(scene) = value.get_mut("scene").and_then(Value::as_object_mut) {
+        for key in ["quarter_domain", "half_domain"] {
+            if scene.get(key) == Some(&Value::Bool(false)) {
+                scene.remove(key);
+            }
+        }
     }
     // A body without a slip length carries its velocity as walls did before the field.
     if let Some(bodies) = value

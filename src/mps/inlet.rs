@@ -16,7 +16,9 @@ use super::particles::{Vector, cell_volume};
 /// the particle arrays, unless a fluid particle lies within 0.5 l0 of one of its positions
 /// (a blocked inlet waits, then catches up one layer per step). Emitted particles start on the
 /// plane itself. It pours `round(volume_m3 / l0^D)` particles in all (the last layer holds
-/// the first points of the lattice order, the rest of a full layer), then stops.
+/// the first points of the lattice order, the rest of a full layer), then stops. Beside
+/// mirror symmetry planes the solver keeps only the section's points on the domain's side,
+/// and fluid's mirror images block the opening as the fluid does.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Inlet<const D: usize> {
     pub centre_m: Vector<D>,

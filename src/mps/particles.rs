@@ -88,6 +88,19 @@ impl<const D: usize> Particles<D> {
         self.kind.push(kind);
         self.tag.push(tag);
     }
+    /// Keeps the particles whose position satisfies `keep`, in their order.
+    pub fn retain(&mut self, keep: impl Fn(&Vector<D>) -> bool) {
+        let kept: Vec<bool> = self.position_m.iter().map(keep).collect();
+        fn cut<T>(values: &mut Vec<T>, kept: &[bool]) {
+            let mut k = kept.iter();
+            values.retain(|_| *k.next().expect("one flag a particle"));
+        }
+        cut(&mut self.position_m, &kept);
+        cut(&mut self.velocity_m_s, &kept);
+        cut(&mut self.pressure_pa, &kept);
+        cut(&mut self.kind, &kept);
+        cut(&mut self.tag, &kept);
+    }
     pub fn count(&self, kind: ParticleKind) -> usize {
         self.kind.iter().filter(|k| **k == kind).count()
     }

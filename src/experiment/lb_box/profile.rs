@@ -52,7 +52,7 @@ impl LbBox {
         let k_m = tau / (m.fluid.density_kg_m3() * m.gravity_m_s2);
         let closed = tau > 0.0 && self.sphere_centres_m.is_empty();
         let front_m = front_position_m(particles, l0);
-        let volume = particles.fluid_count() as f64 * cell_volume(l0, 3);
+        let volume = self.copies() * particles.fluid_count() as f64 * cell_volume(l0, 3);
         let closed_form_front_m = if closed {
             heap_length_m(k_m, g.width_m, volume)
         } else {

@@ -30,12 +30,20 @@ impl<const D: usize> Solver<D> {
             let clearance2 = inlet.clearance_m * inlet.clearance_m;
             let reach = inlet.radius_m + inlet.clearance_m;
             let p = &self.particles;
+            let planes = self.config.symmetry;
+            // Fluid blocks the opening, and so do its mirror images (every combination of
+            // the planes: bits 1..2^D select them; none without planes).
+            let near = |y: Vector<D>| {
+                (y - inlet.centre_m).norm_squared() <= reach * reach
+                    && points.iter().any(|x| (y - x).norm_squared() < clearance2)
+            };
             let blocked = (0..p.len()).any(|i| {
                 p.kind[i] == ParticleKind::Fluid
-                    && (p.position_m[i] - inlet.centre_m).norm_squared() <= reach * reach
-                    && points
-                        .iter()
-                        .any(|x| (p.position_m[i] - x).norm_squared() < clearance2)
+                    && (near(p.position_m[i])
+                        || (1..1u32 << D).any(|bits| {
+                            bits & !planes.axes == 0
+                                && near(planes.reflect_point::<D>(bits, p.position_m[i]))
+                        }))
             });
             if blocked {
                 continue;
