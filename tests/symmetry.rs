@@ -3,7 +3,7 @@
 //! images of its neighbours, is the whole slump cut in four: the same particles on the same
 //! paths to round-off, under the standard scheme and the quiet 3D set.
 mod common;
-use mps_runner::record::{Outcome, read_run};
+use mps_runner::record::read_run;
 use std::collections::HashMap;
 
 /// Fluid particles of a run as (initial position's bits) -> final position.
@@ -24,6 +24,25 @@ fn fluid_paths(path: &std::path::Path) -> HashMap<[u64; 3], [f64; 3]> {
         .collect()
 }
 
+/// Runs `experiment` at the 25 mm-class sets `sets` with both solves at 1e-12 (so that two
+/// runs of different linear systems agree to round-off, not to the default 1e-6), two
+/// threads, asserting that it completed; the folder is returned to keep the file.
+fn run_tight(
+    experiment: &str,
+    sets: &[&str],
+) -> (
+    std::path::PathBuf,
+    std::collections::BTreeMap<String, f64>,
+    tempfile::TempDir,
+) {
+    let mut all = vec!["mps.ppe_tolerance=1e-12", "mps.viscosity_tolerance=1e-12"];
+    all.extend_from_slice(sets);
+    let resolved = common::resolve(experiment, &all);
+    let dir = tempfile::tempdir().unwrap();
+    let result = common::run_completed(&resolved, dir.path(), 2);
+    (result.path, result.summary.metrics, dir)
+}
+
 /// The whole 25 mm slump (360 concrete particles) and its quarter (90), cone lifted, to
 /// `end_s`, with the extra manifest settings `sets`: every particle of the quarter ends where
 /// the particle of the whole that started in the same cell does. A missing or wrongly
@@ -35,26 +54,13 @@ fn fluid_paths(path: &std::path::Path) -> HashMap<[u64; 3], [f64; 3]> {
 fn quarter_follows_the_whole(end_s: f64, sets: &[&str]) {
     let run = |quarter: bool| {
         let end = format!("time.end_s={end_s}");
-        let mut all = vec![
-            "spacing_m=0.025",
-            &end,
-            "mps.ppe_tolerance=1e-12",
-            "mps.viscosity_tolerance=1e-12",
-        ];
+        let mut all = vec!["spacing_m=0.025", &end];
         all.extend_from_slice(sets);
         if quarter {
             all.push("scene.quarter_domain=true");
         }
-        let resolved = common::resolve("slump_3d.yaml", &all);
-        let dir = tempfile::tempdir().unwrap();
-        let result = common::run_in(&resolved, dir.path(), 2);
-        assert_eq!(
-            result.outcome,
-            Outcome::Completed,
-            "{}",
-            result.summary.reason
-        );
-        (fluid_paths(&result.path), result.summary.metrics, dir)
+        let (path, metrics, dir) = run_tight("slump_3d.yaml", &all);
+        (fluid_paths(&path), metrics, dir)
     };
     let (whole, whole_metrics, _keep_whole) = run(false);
     let (quarter, quarter_metrics, _keep_quarter) = run(true);
@@ -178,22 +184,12 @@ fn half_lb_box_is_the_whole_under_the_standard_scheme() {
             "spacing_m=0.025",
             "scene.inlet_diameter_m=0.1",
             "time.end_s=0.25",
-            "mps.ppe_tolerance=1e-12",
-            "mps.viscosity_tolerance=1e-12",
         ];
         if half {
             all.push("scene.half_domain=true");
         }
-        let resolved = common::resolve("lb_box_3d.yaml", &all);
-        let dir = tempfile::tempdir().unwrap();
-        let result = common::run_in(&resolved, dir.path(), 2);
-        assert_eq!(
-            result.outcome,
-            Outcome::Completed,
-            "{}",
-            result.summary.reason
-        );
-        (last_fluid(&result.path), result.summary.metrics, dir)
+        let (path, metrics, dir) = run_tight("lb_box_3d.yaml", &all);
+        (last_fluid(&path), metrics, dir)
     };
     let (whole, whole_metrics, _keep_whole) = run(false);
     let (half, half_metrics, _keep_half) = run(true);
@@ -223,8 +219,8 @@ fn half_lb_box_is_the_whole_under_the_standard_scheme() {
     }
 }
 
-/// Spheres off the plane need a mirrored twin, and W an even number of spacings: the
-/// manifest says so, naming the field.
+/// Spheres off the plane need a mirrored twin, W an even number of spacings, and the
+/// exact projection has no mirror images: the manifest says so, naming the field.
 #[test]
 fn half_lb_box_needs_a_symmetric_box() {
     let load = |path: &std::path::Path, sets: &[&str]| {
@@ -239,6 +235,18 @@ fn half_lb_box_needs_a_symmetric_box() {
     assert!(
         odd.contains("scene.half_domain") && odd.contains("25"),
         "{odd}"
+    );
+    let exact = load(
+        &common::experiment("lb_box_3d.yaml"),
+        &[
+            "mps.pressure_scheme=incremental",
+            "mps.exact_projection=true",
+        ],
+    )
+    .unwrap_err();
+    assert!(
+        exact.contains("scene.half_domain") && exact.contains("exact_projection"),
+        "{exact}"
     );
     // The first sphere moved off the plane (80 mm spheres, so that one fits beside it),
     // alone and then with its twin.

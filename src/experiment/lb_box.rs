@@ -238,17 +238,7 @@ impl Experiment for LbBox {
                 );
             }
         }
-        // The exact projection's gradient rows have no mirror images.
-        if self.half_domain
-            && m.mps.exact_projection
-            && m.mps.pressure_scheme != crate::manifest::PressureSchemeName::Standard
-        {
-            c.fail(
-                "scene.half_domain",
-                "is not available with mps.exact_projection (its gradient rows have no mirror images)"
-                    .into(),
-            );
-        }
+        super::refuse_planes_with_exact_projection(m, c, "scene.half_domain", self.half_domain);
         if super::spacing_ok(m) {
             c.lattice_lengths(&dims, m.spacing_m);
             if self.half_domain {

@@ -548,6 +548,21 @@ pub fn require_3d(m: &Manifest, c: &mut Checker, kind: &str, why: &str) {
     }
 }
 
+/// Fails `field` (a scene's switch to mirror symmetry planes, when on) if the manifest asks
+/// for the exact projection, whose gradient rows have no mirror images.
+pub fn refuse_planes_with_exact_projection(m: &Manifest, c: &mut Checker, field: &str, on: bool) {
+    if on
+        && m.mps.exact_projection
+        && m.mps.pressure_scheme != crate::manifest::PressureSchemeName::Standard
+    {
+        c.fail(
+            field,
+            "is not available with mps.exact_projection (its gradient rows have no mirror images)"
+                .into(),
+        );
+    }
+}
+
 /// Fails `dimension` unless the manifest is 2D: `kind` names the test, `why` says why.
 pub fn require_2d(m: &Manifest, c: &mut Checker, kind: &str, why: &str) {
     if m.dimension != 2 {

@@ -98,17 +98,7 @@ impl Experiment for Slump {
             c.real("scene.cone_slip_length_m", b, NON_NEGATIVE);
         }
         c.real("scene.lift_start_s", self.lift_start_s, NON_NEGATIVE);
-        // The exact projection's gradient rows have no mirror images.
-        if self.quarter_domain
-            && m.mps.exact_projection
-            && m.mps.pressure_scheme != crate::manifest::PressureSchemeName::Standard
-        {
-            c.fail(
-                "scene.quarter_domain",
-                "is not available with mps.exact_projection (its gradient rows have no mirror images)"
-                    .into(),
-            );
-        }
+        super::refuse_planes_with_exact_projection(m, c, "scene.quarter_domain", self.quarter_domain);
         c.real("scene.lift_height_m", self.lift_height_m, POSITIVE);
         if all_ok {
             let widest = self.cone_bottom_diameter_m.max(self.cone_top_diameter_m);
