@@ -4,6 +4,7 @@
 //! cross-section. Its only state is how many particles it has poured so far (kept by the
 //! solver and recorded in the checkpoint); everything else follows from the configuration.
 //! Only `+ - * /`, `sqrt` and comparisons are used (docs/design.md section 6).
+use super::grid::MirrorPlanes;
 use super::particles::{Vector, cell_volume};
 
 /// An opening through which fluid enters at a constant speed.
@@ -119,6 +120,17 @@ impl<const D: usize> Inlet<D> {
             axes.push(v / v.norm());
         }
         axes
+    }
+
+    /// The cross-section's points that the inlet pours beside mirror symmetry planes: those
+    /// on the domain's side of every plane (all of them without planes), in their order. An
+    /// opening that straddles a plane pours its part; the images stand for the rest.
+    pub fn cross_section_beside_m(&self, spacing_m: f64, planes: &MirrorPlanes) -> Vec<Vector<D>> {
+        let mut section = self.cross_section_m(spacing_m);
+        section.retain(|x| {
+            MirrorPlanes::axes_of::<D>(planes.axes).all(|a| x[a] > planes.position_m[a])
+        });
+        section
     }
 
     /// Positions of the cross-section's lattice points, in their fixed order. In-plane

@@ -313,16 +313,7 @@ impl<const D: usize> Solver<D> {
         let inlet_sections = config
             .inlets
             .iter()
-            .map(|inlet| {
-                // Beside mirror planes an opening that straddles one pours only its part on
-                // the domain's side; the images pour the rest.
-                let mut section = inlet.cross_section_m(config.spacing_m);
-                let planes = config.symmetry;
-                section.retain(|x| {
-                    MirrorPlanes::axes_of::<D>(planes.axes).all(|a| x[a] > planes.position_m[a])
-                });
-                section
-            })
+            .map(|inlet| inlet.cross_section_beside_m(config.spacing_m, &config.symmetry))
             .collect();
         Self {
             inlet_emitted: vec![0; config.inlets.len()],

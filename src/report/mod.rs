@@ -555,7 +555,7 @@ fn draw_scene_d<const D: usize>(
         })
         .collect();
     for inlet in &scene.inlets {
-        for x in inlet.cross_section_m(l0) {
+        for x in inlet.cross_section_beside_m(l0, &scene.symmetry) {
             points.push(([x[0], x[1], if D == 3 { x[2] } else { 0.0 }], INLET_KIND));
         }
     }
