@@ -45,6 +45,18 @@ impl MirrorPlanes {
         (0..D).filter(move |a| planes >> a & 1 == 1)
     }
 
+    /// Every non-empty combination of the planes, as plane bits in ascending order: the
+    /// images a point can have (none without planes).
+    pub fn combinations(&self) -> impl Iterator<Item = u32> + use<> {
+        let axes = self.axes;
+        (1..=axes).filter(move |planes| planes & axes == *planes)
+    }
+
+    /// Whether `x` lies on the domain's side of every plane (strictly).
+    pub fn beside<const D: usize>(&self, x: &Vector<D>) -> bool {
+        Self::axes_of::<D>(self.axes).all(|a| x[a] > self.position_m[a])
+    }
+
     /// `x` reflected across the planes in `planes`.
     #[inline]
     pub fn reflect_point<const D: usize>(&self, planes: u32, mut x: Vector<D>) -> Vector<D> {
@@ -337,10 +349,7 @@ impl Neighbours {
         // so that a list's order does not depend on which images existed when it was built.
         let mut extended = positions.to_vec();
         let mut images: Vec<u32> = Vec::new();
-        for planes in 1..8u32 {
-            if planes & mirror.axes != planes {
-                continue;
-            }
+        for planes in mirror.combinations() {
             for (j, x) in positions.iter().enumerate() {
                 let near = MirrorPlanes::axes_of::<D>(planes)
                     .all(|a| x[a] - mirror.position_m[a] < cutoff_m);

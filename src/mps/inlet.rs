@@ -127,9 +127,7 @@ impl<const D: usize> Inlet<D> {
     /// opening that straddles a plane pours its part; the images stand for the rest.
     pub fn cross_section_beside_m(&self, spacing_m: f64, planes: &MirrorPlanes) -> Vec<Vector<D>> {
         let mut section = self.cross_section_m(spacing_m);
-        section.retain(|x| {
-            MirrorPlanes::axes_of::<D>(planes.axes).all(|a| x[a] > planes.position_m[a])
-        });
+        section.retain(|x| planes.beside(x));
         section
     }
 

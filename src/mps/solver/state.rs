@@ -31,8 +31,7 @@ impl<const D: usize> Solver<D> {
             let reach = inlet.radius_m + inlet.clearance_m;
             let p = &self.particles;
             let planes = self.config.symmetry;
-            // Fluid blocks the opening, and so do its mirror images (every combination of
-            // the planes: bits 1..2^D select them; none without planes).
+            // Fluid blocks the opening, and so do its mirror images.
             let near = |y: Vector<D>| {
                 (y - inlet.centre_m).norm_squared() <= reach * reach
                     && points.iter().any(|x| (y - x).norm_squared() < clearance2)
@@ -40,10 +39,9 @@ impl<const D: usize> Solver<D> {
             let blocked = (0..p.len()).any(|i| {
                 p.kind[i] == ParticleKind::Fluid
                     && (near(p.position_m[i])
-                        || (1..1u32 << D).any(|bits| {
-                            bits & !planes.axes == 0
-                                && near(planes.reflect_point::<D>(bits, p.position_m[i]))
-                        }))
+                        || planes
+                            .combinations()
+                            .any(|bits| near(planes.reflect_point::<D>(bits, p.position_m[i]))))
             });
             if blocked {
                 continue;
