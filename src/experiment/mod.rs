@@ -177,6 +177,7 @@ experiments! {$
     LbBox(lb_box::LbBox) = "lb_box",
     TankAtRest(tank_at_rest::TankAtRest) = "tank_at_rest",
     InclinedLayer(inclined_layer::InclinedLayer) = "inclined_layer",
+    Rockfill(rockfill::Rockfill) = "rockfill",
 }
 
 impl SceneSection for SceneSpec {
