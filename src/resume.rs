@@ -206,6 +206,7 @@ fn resume_in<const D: usize>(job: Job) -> Result<RunResult, ResumeError> {
         existing,
     )
     .map_err(RunError::from)?;
+    crate::run::write_file_records(m, &mut recorder)?;
     let (index, step, time) = (
         from.index.to_string(),
         from.step.to_string(),

@@ -3,7 +3,7 @@
 //! fills its bed at a low yield stress without losing a particle.
 mod common;
 use mps_runner::experiment::rockfill::Rockfill;
-use mps_runner::experiment::{SceneSpec, build_scene, experiment_metrics};
+use mps_runner::experiment::{Fill, SceneSpec, build_scene, experiment_metrics};
 use mps_runner::mps::{ParticleKind, Particles, Vector};
 use mps_runner::record::read_run;
 
@@ -170,10 +170,42 @@ fn a_low_yield_stress_fills_the_2d_bed_and_loses_nothing() {
         "{metrics:?}"
     );
     assert!(metrics.contains_key("time_to_fill_s"), "{metrics:?}");
-    // No fluid inside a rock (deeper than half a spacing below its surface: the wall layer's
-    // centres lie from 0 to l0 inside it) or outside the form, at any checkpoint.
+    // The bed is in the file: the rocks' centres and radii, exactly.
     let bed = r.deposit::<2>();
     let run = read_run(&result.path).unwrap();
+    let record = &run.metadata["rock_bed"];
+    // Every number of the JSON arrays, parsed exactly (std's parser rounds correctly;
+    // serde_json's default float parser may miss by an ulp).
+    let numbers = |text: &str| -> Vec<f64> {
+        text.split(['[', ']', ','])
+            .filter(|t| !t.trim().is_empty())
+            .map(|t| t.trim().parse().unwrap())
+            .collect()
+    };
+    let radii: Vec<f64> = bed.rocks.iter().map(|k| k.radius_m).collect();
+    let centres: Vec<f64> = bed
+        .rocks
+        .iter()
+        .flat_map(|k| k.centre_m.iter().copied())
+        .collect();
+    assert_eq!(numbers(&record["radii_m"]), radii);
+    assert_eq!(numbers(&record["centres_m"]), centres);
+    // The report's section of the last checkpoint: the bed zone's cells that are not rock
+    // are concrete, as the filled fraction says (at least 95 %).
+    let maps = mps_runner::report::cell_maps(&run).unwrap();
+    assert_eq!(maps.len(), 1);
+    let map = &maps[0];
+    let rows = (r.bed.height_m / l0).round() as usize;
+    let zone = &map.cells[..rows * map.columns];
+    let rock = zone.iter().filter(|&&c| c == Fill::Rock).count();
+    let concrete = zone.iter().filter(|&&c| c == Fill::Concrete).count();
+    assert!(
+        concrete as f64 >= 0.95 * (zone.len() - rock) as f64 && rock > 0,
+        "{concrete} concrete, {rock} rock of {} cells",
+        zone.len()
+    );
+    // No fluid inside a rock (deeper than half a spacing below its surface: the wall layer's
+    // centres lie from 0 to l0 inside it) or outside the form, at any checkpoint.
     for s in &run.states {
         for i in 0..s.kind.len() {
             if s.kind[i] != 0 {

@@ -12,7 +12,7 @@ pub mod geometry;
 pub mod profile;
 pub mod staged;
 
-pub use profile::{Curve, SurfaceProfile};
+pub use profile::{CellMap, Curve, Fill, SurfaceProfile};
 pub use staged::{StagedFigure, StagedFigures};
 
 /// Summary metrics that builds before `run.math` (see [`crate::record::MATH`]) computed with
@@ -98,6 +98,17 @@ pub trait Experiment {
     /// rise) they tell `runner calibrate` which way to step ([`SceneSpec::stiffening_response`]).
     fn flow_measures(&self) -> &'static [&'static str] {
         &[]
+    }
+    /// Sections of a state as cells (the rock fill's concrete, rock and empty void), drawn
+    /// by the report; none for most tests.
+    fn cell_maps<const D: usize>(&self, _m: &Manifest, _particles: &Particles<D>) -> Vec<CellMap> {
+        Vec::new()
+    }
+    /// Metadata records that describe the scene in the run file (the rock bed's rocks), as
+    /// (record name, entries); none for most tests. Derived from the manifest alone, so a
+    /// resumed file writes the same.
+    fn file_records(&self, _m: &Manifest) -> Vec<FileRecord> {
+        Vec::new()
     }
     /// The test's figures drawn once per stage (the rodding's strokes), `None` for a test
     /// that does not go in stages.
@@ -249,6 +260,15 @@ impl SceneSpec {
         with_experiment!(self, e => e.surface_profile(m, particles, time_s, title))
     }
 
+    /// See [`Experiment::cell_maps`].
+    pub fn cell_maps<const D: usize>(
+        &self,
+        m: &Manifest,
+        particles: &Particles<D>,
+    ) -> Vec<CellMap> {
+        with_experiment!(self, e => e.cell_maps(m, particles))
+    }
+
     /// The test's figures drawn once per stage, if it goes in stages.
     pub fn staged_figures(&self) -> Option<StagedFigures> {
         with_experiment!(self, e => e.staged_figures())
@@ -266,6 +286,14 @@ pub struct Crossing {
     pub metric: &'static str,
     pub threshold: f64,
     pub since_s: f64,
+}
+
+/// A metadata record of a run file: its name and its (key, value) entries.
+pub type FileRecord = (&'static str, Vec<(&'static str, String)>);
+
+/// See [`Experiment::file_records`].
+pub fn file_records(m: &Manifest) -> Vec<FileRecord> {
+    with_experiment!(&m.scene, e => e.file_records(m))
 }
 
 /// See [`Experiment::crossings`].

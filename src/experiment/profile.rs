@@ -26,3 +26,29 @@ pub struct SurfaceProfile {
     /// The closed form for the run's volume: its own front or radius.
     pub closed_for_volume: Option<Curve>,
 }
+
+/// What a cell of a [`CellMap`] shows.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Fill {
+    /// Concrete: a fluid particle within a spacing of the cell's centre.
+    Concrete,
+    /// Solid (a rock).
+    Rock,
+    /// Neither: void no concrete reached, or air.
+    Empty,
+}
+
+/// A section of a state as square cells of one spacing (the report draws it): `cells` row by
+/// row from the lower left, the first axis fastest.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CellMap {
+    pub title: String,
+    pub x_label: &'static str,
+    pub y_label: &'static str,
+    /// Lower-left corner of the map and the cells' size, metres.
+    pub origin_m: (f64, f64),
+    pub cell_m: f64,
+    pub columns: usize,
+    pub rows: usize,
+    pub cells: Vec<Fill>,
+}

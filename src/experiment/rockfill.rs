@@ -16,7 +16,7 @@ use super::boundaries::{fill_solid, taken_cells};
 use super::geometry::container::{CellBox, add_walls};
 use super::geometry::lattice::cells;
 use super::geometry::shapes::Shape;
-use super::{Crossing, Experiment, Manifest, Scene};
+use super::{CellMap, Crossing, Experiment, Fill, Manifest, Scene};
 use crate::manifest::validate::{Checker, NON_NEGATIVE, POSITIVE, between, fmt_num};
 use crate::mps::grid::MirrorPlanes;
 use crate::mps::particles::cell_volume;
@@ -375,6 +375,8 @@ impl Experiment for Rockfill {
             "surface_height_mean_m",
             "surface_height_max_m",
             "floor_reach_m",
+            "surface_slope",
+            "closed_form_surface_slope",
         ]);
         names.extend(LAYER_NAMES.iter().take(self.layers.min(MAX_LAYERS) as usize));
         names
@@ -389,10 +391,70 @@ impl Experiment for Rockfill {
     ) {
         let prepared = self.prepared::<D>(m.spacing_m);
         prepared.measure(particles, out);
+        // The slope at which a yield-stress material stands in the bed: the yield stress
+        // over the weight per wetted area, rho g R_h, with the bed's hydraulic radius (void
+        // over wetted surface: R_h = phi d / (6 (1 - phi)) for spheres of Sauter diameter d,
+        // phi d / (4 (1 - phi)) for discs); the reasoning of the L-box law (issue 30 item 4).
+        let tau_pa = super::yield_stress_pa(&m.fluid);
+        let r_h = prepared.hydraulic_radius_m();
+        let closed = if r_h > 0.0 {
+            tau_pa / (m.fluid.density_kg_m3() * m.gravity_m_s2 * r_h)
+        } else {
+            0.0
+        };
+        out.insert("closed_form_surface_slope".into(), closed);
     }
 
     fn trend_metric(&self) -> &'static str {
         "filled_fraction"
+    }
+
+    /// A vertical section through the first pour's axis and, in 3D, a plan view at half the
+    /// bed's height: concrete, rock and empty cells over the whole form.
+    fn cell_maps<const D: usize>(&self, m: &Manifest, particles: &Particles<D>) -> Vec<CellMap> {
+        let l0 = m.spacing_m;
+        let bed = self.deposit::<D>();
+        let interior = self.interior::<D>(l0);
+        let n: [usize; D] = std::array::from_fn(|a| interior.1[a] as usize);
+        let pour = &self.pours[0].centre_m;
+        let at = |a: usize, x: f64| ((x / l0).floor().max(0.0) as usize).min(n[a] - 1);
+        let mut maps = Vec::new();
+        if D == 2 {
+            maps.push(section(particles, &bed, l0, [0, 1], None, n, "vertical section"));
+        } else {
+            let y = at(1, pour[1]);
+            let title = format!("vertical section at y = {:.3} m", (y as f64 + 0.5) * l0);
+            maps.push(section(particles, &bed, l0, [0, 2], Some((1, y)), n, &title));
+            let z = at(D - 1, 0.5 * self.bed.height_m);
+            let title = format!("plan view at z = {:.3} m", (z as f64 + 0.5) * l0);
+            maps.push(section(particles, &bed, l0, [0, 1], Some((2, z)), n, &title));
+        }
+        maps
+    }
+
+    /// `rock_bed`: the deposited rocks (centres and radii in metres, JSON arrays in full
+    /// precision), with the seed, the drops and the porosity of the bed zone.
+    fn file_records(&self, m: &Manifest) -> Vec<super::FileRecord> {
+        let (centres, radii, drops) = if m.dimension == 3 {
+            bed_json(&self.deposit::<3>())
+        } else {
+            bed_json(&self.deposit::<2>())
+        };
+        let porosity = if m.dimension == 3 {
+            self.porosity::<3>()
+        } else {
+            self.porosity::<2>()
+        };
+        vec![(
+            "rock_bed",
+            vec![
+                ("seed", self.bed.seed.to_string()),
+                ("drops", drops.to_string()),
+                ("porosity", format!("{porosity:?}")),
+                ("centres_m", centres),
+                ("radii_m", radii),
+            ],
+        )]
     }
 
     fn crossings(&self, _m: &Manifest) -> Vec<Crossing> {
@@ -403,6 +465,18 @@ impl Experiment for Rockfill {
             since_s: 0.0,
         }]
     }
+}
+
+/// The rocks' centres and radii as JSON arrays (shortest round-trip decimals: exact), and
+/// the number of drops.
+fn bed_json<const D: usize>(bed: &Bed<D>) -> (String, String, u64) {
+    let centres: Vec<Vec<f64>> = bed.rocks.iter().map(|r| r.centre_m.iter().copied().collect()).collect();
+    let radii: Vec<f64> = bed.rocks.iter().map(|r| r.radius_m).collect();
+    (
+        serde_json::to_string(&centres).expect("numbers serialize"),
+        serde_json::to_string(&radii).expect("numbers serialize"),
+        bed.drops,
+    )
 }
 
 /// A rock's volume (area in 2D) for diameter d.
@@ -555,6 +629,20 @@ impl Rockfill {
         self.deposition::<D>().deposit()
     }
 
+    /// Porosity of the bed zone (the form's nominal footprint up to the bed's height): one
+    /// less the rocks' volume over the zone's (every rock lies wholly inside it).
+    pub fn porosity<const D: usize>(&self) -> f64 {
+        let form = self.deposition::<D>().form_m;
+        let zone: f64 = (0..D - 1).map(|a| form[a]).product::<f64>() * self.bed.height_m;
+        let solid: f64 = self
+            .deposit::<D>()
+            .rocks
+            .iter()
+            .map(|r| rock_volume(2.0 * r.radius_m, D))
+            .sum();
+        1.0 - solid / zone
+    }
+
     /// The form's inside as lattice cells.
     fn interior<const D: usize>(&self, spacing_m: f64) -> CellBox<D> {
         let n = |x: f64| cells(x, spacing_m);
@@ -639,6 +727,9 @@ struct Voxels<const D: usize> {
     contacts: Vec<Vector<D>>,
     porosity: f64,
     rocks: usize,
+    /// The rocks' volume over their surface, times 2D (6 for spheres, 4 for discs): the
+    /// Sauter mean diameter sum d^3 / sum d^2 (sum d^2 / sum d for discs).
+    surface_diameter_m: f64,
     /// x of the first pour's centre.
     pour_x_m: f64,
 }
@@ -672,13 +763,6 @@ impl<const D: usize> Voxels<D> {
             })
             .collect();
         let form = scene.deposition::<D>().form_m;
-        let zone: f64 =
-            (0..D - 1).map(|a| form[a]).product::<f64>() * scene.bed.height_m;
-        let solid: f64 = bed
-            .rocks
-            .iter()
-            .map(|r| rock_volume(2.0 * r.radius_m, D))
-            .sum();
         Self {
             spacing_m,
             n,
@@ -687,10 +771,27 @@ impl<const D: usize> Voxels<D> {
             layer_void,
             layer_rows,
             contacts: contacts(&bed, &form, scene.bed.gap_m),
-            porosity: 1.0 - solid / zone,
+            porosity: scene.porosity::<D>(),
+            surface_diameter_m: {
+                let moment = |k: usize| -> f64 {
+                    bed.rocks
+                        .iter()
+                        .map(|r| (0..k).fold(1.0, |v, _| v * 2.0 * r.radius_m))
+                        .sum()
+                };
+                if bed.rocks.is_empty() { 0.0 } else { moment(D) / moment(D - 1) }
+            },
             rocks: bed.rocks.len(),
             pour_x_m: scene.pours.first().map_or(0.0, |p| p.centre_m[0]),
         }
+    }
+
+    /// The bed's hydraulic radius, void over wetted surface: phi d / (2 D (1 - phi)).
+    fn hydraulic_radius_m(&self) -> f64 {
+        if self.rocks == 0 || self.porosity >= 1.0 {
+            return 0.0;
+        }
+        self.porosity * self.surface_diameter_m / (2.0 * D as f64 * (1.0 - self.porosity))
     }
 
     /// Index of the voxel of the form's footprint holding x (any height), if inside it.
@@ -764,6 +865,34 @@ impl<const D: usize> Voxels<D> {
         );
         out.insert("surface_height_max_m".into(), hi);
         out.insert("floor_reach_m".into(), reach);
+        out.insert("surface_slope".into(), self.surface_slope(&heights));
+    }
+
+    /// How fast the surface falls with the distance along x from the first pour: the
+    /// least-squares slope of the columns' surface heights against |x - x_pour|, over the
+    /// columns whose surface lies inside the bed zone (concrete there, below the zone's top),
+    /// negated (positive: falling away from the pour); 0 with fewer than three such columns.
+    fn surface_slope(&self, heights: &[f64]) -> f64 {
+        let l0 = self.spacing_m;
+        let zone_top = self.n[D - 1] as f64 * l0;
+        let (mut n, mut sx, mut sy, mut sxx, mut sxy) = (0.0, 0.0, 0.0, 0.0, 0.0);
+        for (column, &h) in heights.iter().enumerate() {
+            if h <= 0.0 || h >= zone_top {
+                continue;
+            }
+            let x = ((column % self.n[0]) as f64 + 0.5) * l0;
+            let d = (x - self.pour_x_m).abs();
+            n += 1.0;
+            sx += d;
+            sy += h;
+            sxx += d * d;
+            sxy += d * h;
+        }
+        let spread = n * sxx - sx * sx;
+        if n < 3.0 || spread <= 0.0 {
+            return 0.0;
+        }
+        -(n * sxy - sx * sy) / spread
     }
 
     /// Marks the voxels whose centres lie within one spacing of the fluid particle at x.
@@ -871,6 +1000,83 @@ impl<const D: usize> Voxels<D> {
             let at = if largest.0 > 0 { largest.1[a] } else { 0.0 };
             out.insert(format!("largest_pocket_{name}_m"), at);
         }
+    }
+}
+
+/// The cells of the plane spanned by `axes` (at cell `fixed` of the remaining axis in 3D)
+/// over the form's n cells: rock where the centre lies in a rock, concrete where a fluid
+/// particle lies within a spacing of it, empty else.
+fn section<const D: usize>(
+    particles: &Particles<D>,
+    bed: &Bed<D>,
+    l0: f64,
+    axes: [usize; 2],
+    fixed: Option<(usize, usize)>,
+    n: [usize; D],
+    title: &str,
+) -> CellMap {
+    let (columns, rows) = (n[axes[0]], n[axes[1]]);
+    let centre = |i: usize, j: usize| {
+        let mut x = Vector::<D>::zeros();
+        x[axes[0]] = (i as f64 + 0.5) * l0;
+        x[axes[1]] = (j as f64 + 0.5) * l0;
+        if let Some((a, k)) = fixed {
+            x[a] = (k as f64 + 0.5) * l0;
+        }
+        x
+    };
+    let mut cells = vec![Fill::Empty; columns * rows];
+    for i in 0..particles.len() {
+        if particles.kind[i] != ParticleKind::Fluid {
+            continue;
+        }
+        let x = particles.position_m[i];
+        if let Some((a, k)) = fixed
+            && ((k as f64 + 0.5) * l0 - x[a]).abs() > l0
+        {
+            continue;
+        }
+        let ci = (x[axes[0]] / l0).floor() as i64;
+        let cj = (x[axes[1]] / l0).floor() as i64;
+        for dj in -1..=1 {
+            for di in -1..=1 {
+                let (ii, jj) = (ci + di, cj + dj);
+                if ii < 0 || jj < 0 || ii >= columns as i64 || jj >= rows as i64 {
+                    continue;
+                }
+                let (ii, jj) = (ii as usize, jj as usize);
+                if (centre(ii, jj) - x).norm_squared() <= l0 * l0 {
+                    cells[jj * columns + ii] = Fill::Concrete;
+                }
+            }
+        }
+    }
+    for j in 0..rows {
+        for i in 0..columns {
+            let c = centre(i, j);
+            if bed
+                .rocks
+                .iter()
+                .any(|r| (c - r.centre_m).norm_squared() < r.radius_m * r.radius_m)
+            {
+                cells[j * columns + i] = Fill::Rock;
+            }
+        }
+    }
+    let name = |a: usize| match a {
+        0 => "x [m]",
+        1 => "y [m]",
+        _ => "z [m]",
+    };
+    CellMap {
+        title: title.to_string(),
+        x_label: name(axes[0]),
+        y_label: name(axes[1]),
+        origin_m: (0.0, 0.0),
+        cell_m: l0,
+        columns,
+        rows,
+        cells,
     }
 }
 

@@ -521,6 +521,24 @@ pub use profile::{profile, profile_if_any, profiles};
 /// lattice cells nearest the plane; defaults: the middle of the particles' y range and a
 /// quarter of the way up their z range), in 2D the plane itself. Files
 /// `<name>-scene-{side,top}.svg` (3D) or `<name>-scene.svg` (2D) in `out_dir`.
+/// The test's sections of the run's last checkpoint as cells ([`crate::experiment::Experiment::cell_maps`]); empty for most tests.
+pub fn cell_maps(run: &RunFile) -> Result<Vec<crate::experiment::CellMap>> {
+    let resolved = crate::restore::manifest_of(run)
+        .map_err(|e| ReportError::Input(format!("the run's manifest: {e}")))?;
+    let m = &resolved.manifest;
+    let Some(state) = run.states.last() else {
+        return Ok(Vec::new());
+    };
+    let last = |e: String| ReportError::Input(format!("last checkpoint: {e}"));
+    Ok(if m.dimension == 3 {
+        let p = crate::checkpoint::particles_from_message::<3>(state).map_err(last)?;
+        m.scene.cell_maps(m, &p)
+    } else {
+        let p = crate::checkpoint::particles_from_message::<2>(state).map_err(last)?;
+        m.scene.cell_maps(m, &p)
+    })
+}
+
 pub fn draw_scene(
     m: &crate::experiment::Manifest,
     at_y_m: Option<f64>,

@@ -166,6 +166,20 @@ fn run_report(path: &Path, options: &ReportOptions) -> Result<Report> {
         ),
     }
 
+    // The test's sections of the last checkpoint as cells (the rock fill's concrete, rock
+    // and empty void).
+    match super::cell_maps(&run) {
+        Ok(maps) => {
+            for (k, map) in maps.iter().enumerate() {
+                let svg = f.svg(&format!("cells-{k:02}-{}", super::slug(&map.title)));
+                let title = format!("{}: {}", super::run_title(&run), map.title);
+                let drawn = super::plot::cell_map(&svg, &title, map);
+                f.add(&svg, format!("{} of the last checkpoint", map.title), drawn);
+            }
+        }
+        Err(e) => f.skipped.push(format!("the test's sections: {e}")),
+    }
+
     // A test that goes in stages: its figures against the stage, and the per-stage table.
     let mut stage_table = None;
     match super::staged::staged_figures(&run) {

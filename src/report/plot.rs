@@ -10,6 +10,7 @@ use plotters::prelude::*;
 
 use super::cloud::Frame;
 use super::{ReportError, Result};
+use crate::experiment::{CellMap, Fill};
 
 /// One line of a chart: the tests' profile curves are drawn as they are.
 pub use crate::experiment::Curve as Series;
@@ -396,6 +397,68 @@ fn category_label(field: &str, value: i64) -> String {
         ("flowing", 1) => "flowing".into(),
         (f, v) => format!("{f} = {v}"),
     }
+}
+
+/// Colours of the cells of a [`CellMap`]: concrete blue, rock grey, empty orange.
+fn fill_colour(fill: Fill) -> RGBColor {
+    match fill {
+        Fill::Concrete => PALETTE[0],
+        Fill::Rock => WALL_GREY,
+        Fill::Empty => RGBColor(253, 208, 162),
+    }
+}
+
+/// A section as square cells (one `<rect>` each), to scale, with a legend of the three fills.
+pub fn cell_map(path: &Path, title: &str, map: &CellMap) -> Result<()> {
+    let err = write_err(path);
+    let e = |x: &dyn std::fmt::Display| err(x.to_string());
+    let (x0, y0) = map.origin_m;
+    let (x1, y1) = (
+        x0 + map.columns as f64 * map.cell_m,
+        y0 + map.rows as f64 * map.cell_m,
+    );
+    let width = 900u32;
+    let plot_w = f64::from(width - 120);
+    let height = ((plot_w * (y1 - y0) / (x1 - x0)).clamp(150.0, 1400.0)) as u32 + 110;
+    let root = SVGBackend::new(path, (width, height)).into_drawing_area();
+    root.fill(&WHITE).map_err(|x| e(&x))?;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(title, ("sans-serif", 20))
+        .margin(10)
+        .x_label_area_size(45)
+        .y_label_area_size(70)
+        .build_cartesian_2d(x0..x1, y0..y1)
+        .map_err(|x| e(&x))?;
+    chart
+        .configure_mesh()
+        .x_desc(map.x_label)
+        .y_desc(map.y_label)
+        .light_line_style(WHITE.mix(0.0))
+        .draw()
+        .map_err(|x| e(&x))?;
+    for (fill, label) in [
+        (Fill::Concrete, "concrete"),
+        (Fill::Rock, "rock"),
+        (Fill::Empty, "empty (void not reached, air)"),
+    ] {
+        let colour = fill_colour(fill);
+        let cells = (0..map.cells.len())
+            .filter(|&k| map.cells[k] == fill)
+            .map(|k| {
+                let (i, j) = (k % map.columns, k / map.columns);
+                let lo = (x0 + i as f64 * map.cell_m, y0 + j as f64 * map.cell_m);
+                let hi = (lo.0 + map.cell_m, lo.1 + map.cell_m);
+                Rectangle::new([lo, hi], colour.filled())
+            });
+        chart
+            .draw_series(cells)
+            .map_err(|x| e(&x))?
+            .label(label)
+            .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 12, y + 5)], colour.filled()));
+    }
+    draw_legend(&mut chart).map_err(|x| e(&x))?;
+    root.present().map_err(|x| e(&x))?;
+    Ok(())
 }
 
 #[cfg(test)]

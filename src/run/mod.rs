@@ -171,6 +171,18 @@ pub fn run_header(resolved: &Resolved, threads: usize) -> RunHeader<'_> {
     }
 }
 
+/// The test's own metadata records ([`crate::experiment::file_records`]).
+pub fn write_file_records(
+    m: &crate::experiment::Manifest,
+    recorder: &mut Recorder,
+) -> Result<(), RunError> {
+    for (name, entries) in crate::experiment::file_records(m) {
+        let entries: Vec<(&str, &str)> = entries.iter().map(|(k, v)| (*k, v.as_str())).collect();
+        recorder.write_metadata(name, &entries)?;
+    }
+    Ok(())
+}
+
 fn run_in<const D: usize>(
     resolved: &Resolved,
     options: &RunOptions,
@@ -187,6 +199,7 @@ fn run_in<const D: usize>(
         Existing::Refuse
     };
     let mut recorder = Recorder::create_with(&path, &run_header(resolved, threads), existing)?;
+    write_file_records(m, &mut recorder)?;
     let started = std::time::Instant::now();
     let control = LoopControl {
         interrupt: options.interrupt.clone(),
