@@ -14,27 +14,26 @@ fn spec(m: &mps_runner::experiment::Manifest) -> &Rockfill {
     }
 }
 
+/// The bed of `m` checked (`Bed::check`) and deposited twice the same; its rock count and the
+/// porosity its scene's metrics report.
+fn checked_bed<const D: usize>(m: &mps_runner::experiment::Manifest, name: &str) -> (usize, f64) {
+    let d = spec(m).deposition::<D>();
+    let bed = d.deposit();
+    bed.check(&d).unwrap_or_else(|e| panic!("{name}: {e}"));
+    assert_eq!(bed, d.deposit(), "{name}: the same bed twice");
+    let scene = build_scene::<D>(m);
+    let metrics = experiment_metrics(m, &scene.particles, 0.0);
+    (bed.rocks.len(), metrics["bed_porosity"])
+}
+
 #[test]
 fn the_shipped_beds_rest_without_overlap_and_repeat_bit_for_bit() {
     for (name, dimension) in [("rockfill_3d.yaml", 3), ("rockfill_2d.yaml", 2)] {
         let m = common::resolve(name, &[]).manifest;
-        let r = spec(&m);
         let (rocks, porosity) = if dimension == 3 {
-            let d = r.deposition::<3>();
-            let bed = d.deposit();
-            bed.check(&d).unwrap_or_else(|e| panic!("{name}: {e}"));
-            assert_eq!(bed, d.deposit(), "{name}: the same bed twice");
-            let scene = build_scene::<3>(&m);
-            let metrics = experiment_metrics(&m, &scene.particles, 0.0);
-            (bed.rocks.len(), metrics["bed_porosity"])
+            checked_bed::<3>(&m, name)
         } else {
-            let d = r.deposition::<2>();
-            let bed = d.deposit();
-            bed.check(&d).unwrap_or_else(|e| panic!("{name}: {e}"));
-            assert_eq!(bed, d.deposit(), "{name}: the same bed twice");
-            let scene = build_scene::<2>(&m);
-            let metrics = experiment_metrics(&m, &scene.particles, 0.0);
-            (bed.rocks.len(), metrics["bed_porosity"])
+            checked_bed::<2>(&m, name)
         };
         // The laboratory block: 80-120 mm rocks in a 0.4 m form, so walls and the rough top
         // loosen the packing beyond the bulk's 0.42 (bed.rs, a bed of one size).

@@ -285,15 +285,10 @@ impl Experiment for Rockfill {
                 );
             }
             if c.is_clean() {
-                for (k, inlet) in self.inlets::<2>(m.spacing_m).iter().enumerate().filter(|_| d == 2) {
-                    if let Err(message) = inlet.validate(m.spacing_m) {
-                        c.fail(&format!("scene.pours.{k}.diameter_m"), message);
-                    }
-                }
-                for (k, inlet) in self.inlets::<3>(m.spacing_m).iter().enumerate().filter(|_| d == 3) {
-                    if let Err(message) = inlet.validate(m.spacing_m) {
-                        c.fail(&format!("scene.pours.{k}.diameter_m"), message);
-                    }
+                if d == 3 {
+                    self.check_inlets::<3>(m.spacing_m, c);
+                } else {
+                    self.check_inlets::<2>(m.spacing_m, c);
                 }
             }
         }
@@ -550,6 +545,15 @@ impl Rockfill {
         }
     }
 
+    /// Each pour's opening must hold a lattice point at the spacing.
+    fn check_inlets<const D: usize>(&self, spacing_m: f64, c: &mut Checker) {
+        for (k, inlet) in self.inlets::<D>(spacing_m).iter().enumerate() {
+            if let Err(message) = inlet.validate(spacing_m) {
+                c.fail(&format!("scene.pours.{k}.diameter_m"), message);
+            }
+        }
+    }
+
     fn check_pours(&self, d: usize, c: &mut Checker) -> bool {
         if self.pours.is_empty() || self.pours.len() > MAX_POURS {
             c.fail(
@@ -723,8 +727,9 @@ struct Voxels<const D: usize> {
     /// Void voxels in each layer, and the first row of each layer (and one past the last).
     layer_void: Vec<usize>,
     layer_rows: Vec<usize>,
-    /// Points where two rocks, or a rock and a wall or the floor, touch (across the gap).
-    contacts: Vec<Vector<D>>,
+    /// Whether a voxel's centre lies within 2 l0 of a point where two rocks, or a rock and
+    /// a wall or the floor, touch (across the gap).
+    near_contact: Vec<bool>,
     porosity: f64,
     rocks: usize,
     /// The rocks' volume over their surface, times 2D (6 for spheres, 4 for discs): the
@@ -737,6 +742,7 @@ struct Voxels<const D: usize> {
 impl<const D: usize> Voxels<D> {
     fn new(scene: &Rockfill, spacing_m: f64) -> Self {
         let bed = scene.deposit::<D>();
+        let form = scene.deposition::<D>().form_m;
         let interior = scene.interior::<D>(spacing_m);
         let rows = ((scene.bed.height_m / spacing_m).ceil() as usize).max(1);
         let n: [usize; D] = std::array::from_fn(|a| {
@@ -752,6 +758,15 @@ impl<const D: usize> Voxels<D> {
                 .iter()
                 .all(|r| (x - r.centre_m).norm_squared() > r.radius_m * r.radius_m);
         }
+        let contacts = contacts(&bed, &form, scene.bed.gap_m);
+        let near_contact = (0..total)
+            .map(|v| {
+                let x = voxel_centre(v, &n, spacing_m);
+                contacts
+                    .iter()
+                    .any(|p| (p - x).norm_squared() <= 4.0 * spacing_m * spacing_m)
+            })
+            .collect();
         let layers = scene.layers.clamp(1, MAX_LAYERS) as usize;
         let layer_rows: Vec<usize> = (0..=layers).map(|k| k * rows / layers).collect();
         let layer_void = (0..layers)
@@ -762,7 +777,6 @@ impl<const D: usize> Voxels<D> {
                     .count()
             })
             .collect();
-        let form = scene.deposition::<D>().form_m;
         Self {
             spacing_m,
             n,
@@ -770,7 +784,7 @@ impl<const D: usize> Voxels<D> {
             void,
             layer_void,
             layer_rows,
-            contacts: contacts(&bed, &form, scene.bed.gap_m),
+            near_contact,
             porosity: scene.porosity::<D>(),
             surface_diameter_m: {
                 let moment = |k: usize| -> f64 {
@@ -960,11 +974,7 @@ impl<const D: usize> Voxels<D> {
                 if (v / strides[D - 1]) % rows == rows - 1 {
                     open = true;
                 }
-                let near = self
-                    .contacts
-                    .iter()
-                    .any(|p| (p - c).norm_squared() <= 4.0 * l0 * l0);
-                far_here += usize::from(!near);
+                far_here += usize::from(!self.near_contact[v]);
                 for a in 0..D {
                     let k = (v / strides[a]) % self.n[a];
                     if k > 0 && !seen[v - strides[a]] && empty(v - strides[a]) {

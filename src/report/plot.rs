@@ -69,6 +69,49 @@ fn bounds(points: impl Iterator<Item = (f64, f64)>) -> ((f64, f64), (f64, f64)) 
     (padded(x0, x1), padded(y0, y1))
 }
 
+/// Chart layouts: caption font size, margin, and the x and y label areas, in pixels.
+const LINE_LAYOUT: [u32; 4] = [22, 15, 50, 80];
+/// Drawings to scale (snapshots, cell maps).
+const SCALED_LAYOUT: [u32; 4] = [20, 10, 45, 70];
+
+type Chart<'a, DB> = ChartContext<
+    'a,
+    DB,
+    Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
+>;
+
+/// A chart on `root` over [x0, x1] x [y0, y1] with its caption and labelled axes (no grid).
+fn chart<'a, DB: DrawingBackend>(
+    root: &'a DrawingArea<DB, plotters::coord::Shift>,
+    title: &str,
+    layout: [u32; 4],
+    (x0, x1): (f64, f64),
+    (y0, y1): (f64, f64),
+    (x_label, y_label): (&str, &str),
+) -> std::result::Result<Chart<'a, DB>, DrawingAreaErrorKind<DB::ErrorType>> {
+    let mut chart = ChartBuilder::on(root)
+        .caption(title, ("sans-serif", layout[0]))
+        .margin(layout[1])
+        .x_label_area_size(layout[2])
+        .y_label_area_size(layout[3])
+        .build_cartesian_2d(x0..x1, y0..y1)?;
+    chart
+        .configure_mesh()
+        .x_desc(x_label)
+        .y_desc(y_label)
+        .light_line_style(WHITE.mix(0.0))
+        .draw()?;
+    Ok(chart)
+}
+
+/// Width of the plot area of a drawing to scale `width` pixels wide, and the drawing's
+/// height for [x0, x1] x [y0, y1] (the plot 150 to 1400 pixels high).
+fn scaled_size(width: u32, (x0, x1): (f64, f64), (y0, y1): (f64, f64)) -> (f64, u32) {
+    let plot_w = f64::from(width - 120);
+    let plot_h = (plot_w * (y1 - y0) / (x1 - x0)).clamp(150.0, 1400.0);
+    (plot_w, plot_h as u32 + 110)
+}
+
 /// A line chart: one `<polyline>` per series (plus one `<circle>` per point when `markers`),
 /// a legend when there is more than one series or `markers` is on.
 pub fn line_plot(
@@ -84,20 +127,15 @@ pub fn line_plot(
     let ((x0, x1), (y0, y1)) = bounds(series.iter().flat_map(|s| s.points.iter().copied()));
     let root = SVGBackend::new(path, (900, 600)).into_drawing_area();
     root.fill(&WHITE).map_err(|x| e(&x))?;
-    let mut chart = ChartBuilder::on(&root)
-        .caption(title, ("sans-serif", 22))
-        .margin(15)
-        .x_label_area_size(50)
-        .y_label_area_size(80)
-        .build_cartesian_2d(x0..x1, y0..y1)
-        .map_err(|x| e(&x))?;
-    chart
-        .configure_mesh()
-        .x_desc(x_label)
-        .y_desc(y_label)
-        .light_line_style(WHITE.mix(0.0))
-        .draw()
-        .map_err(|x| e(&x))?;
+    let mut chart = chart(
+        &root,
+        title,
+        LINE_LAYOUT,
+        (x0, x1),
+        (y0, y1),
+        (x_label, y_label),
+    )
+    .map_err(|x| e(&x))?;
     for (i, s) in series.iter().enumerate() {
         let color = PALETTE[i % PALETTE.len()];
         let drawn = chart
@@ -223,9 +261,7 @@ pub fn snapshot_plot(
     let shown = |i: usize| view != View::Top || !is_wall(i);
     let ((x0, x1), (y0, y1)) = bounds((0..pts.len()).filter(|&i| shown(i)).map(|i| pts[i]));
     let width = 1000u32;
-    let plot_w = f64::from(width - 120);
-    let plot_h = (plot_w * (y1 - y0) / (x1 - x0)).clamp(150.0, 1400.0);
-    let height = plot_h as u32 + 110;
+    let (plot_w, height) = scaled_size(width, (x0, x1), (y0, y1));
 
     let values = &frame.fields[field];
     let colored: Vec<f32> = (0..pts.len())
@@ -246,20 +282,15 @@ pub fn snapshot_plot(
     if let Coloring::Ramp(lo, hi) = coloring {
         colour_bar(&bar, field, lo, hi, height).map_err(|x| e(&x))?;
     }
-    let mut chart = ChartBuilder::on(&root)
-        .caption(title, ("sans-serif", 20))
-        .margin(10)
-        .x_label_area_size(45)
-        .y_label_area_size(70)
-        .build_cartesian_2d(x0..x1, y0..y1)
-        .map_err(|x| e(&x))?;
-    chart
-        .configure_mesh()
-        .x_desc("x [m]")
-        .y_desc(if side_view { "z [m]" } else { "y [m]" })
-        .light_line_style(WHITE.mix(0.0))
-        .draw()
-        .map_err(|x| e(&x))?;
+    let mut chart = chart(
+        &root,
+        title,
+        SCALED_LAYOUT,
+        (x0, x1),
+        (y0, y1),
+        ("x [m]", if side_view { "z [m]" } else { "y [m]" }),
+    )
+    .map_err(|x| e(&x))?;
     let color_of = |v: f32| -> RGBColor {
         match &coloring {
             Coloring::Categorical(cats) => {
@@ -418,24 +449,18 @@ pub fn cell_map(path: &Path, title: &str, map: &CellMap) -> Result<()> {
         y0 + map.rows as f64 * map.cell_m,
     );
     let width = 900u32;
-    let plot_w = f64::from(width - 120);
-    let height = ((plot_w * (y1 - y0) / (x1 - x0)).clamp(150.0, 1400.0)) as u32 + 110;
+    let (_, height) = scaled_size(width, (x0, x1), (y0, y1));
     let root = SVGBackend::new(path, (width, height)).into_drawing_area();
     root.fill(&WHITE).map_err(|x| e(&x))?;
-    let mut chart = ChartBuilder::on(&root)
-        .caption(title, ("sans-serif", 20))
-        .margin(10)
-        .x_label_area_size(45)
-        .y_label_area_size(70)
-        .build_cartesian_2d(x0..x1, y0..y1)
-        .map_err(|x| e(&x))?;
-    chart
-        .configure_mesh()
-        .x_desc(map.x_label)
-        .y_desc(map.y_label)
-        .light_line_style(WHITE.mix(0.0))
-        .draw()
-        .map_err(|x| e(&x))?;
+    let mut chart = chart(
+        &root,
+        title,
+        SCALED_LAYOUT,
+        (x0, x1),
+        (y0, y1),
+        (map.x_label, map.y_label),
+    )
+    .map_err(|x| e(&x))?;
     for (fill, label) in [
         (Fill::Concrete, "concrete"),
         (Fill::Rock, "rock"),
