@@ -100,7 +100,10 @@ fn a_run_report_is_one_page_with_its_figures_embedded() {
     );
     assert!(html.contains("at the frame nearest t = 0.05 s"));
 
-    // The run's facts and every summary metric.
+    // The page opens with the summary (experiment, hash, outcome), then the run's facts and
+    // every summary metric.
+    let summary = html.find("<h2>Summary</h2>").expect("a summary table");
+    assert!(summary < html.find("<h2>Run</h2>").unwrap());
     assert!(html.contains(&run.summary.experiment_sha256));
     assert!(html.contains("<td>completed</td>"));
     for name in run.summary.metrics.keys() {
@@ -164,4 +167,46 @@ fn a_report_of_nothing_is_refused() {
     let (code, _, stderr) = runner(&["report".as_ref(), dir.path().as_os_str()]);
     assert_eq!(code, Some(2), "{stderr}");
     assert!(stderr.contains("no finished run file"), "{stderr}");
+}
+
+#[test]
+fn closed_forms_stand_beside_what_they_predict() {
+    // The page's summary table pairs each `closed_form_*` metric with its measured twin.
+    let pairs = |name: &str| {
+        let m = common::resolve(name, &[]).manifest;
+        mps_runner::experiment::closed_form_pairs(&m)
+    };
+    let has = |all: &[(String, Option<String>)], closed: &str, measured: Option<&str>| {
+        assert!(
+            all.iter()
+                .any(|(c, m)| c == closed && m.as_deref() == measured),
+            "{closed} beside {measured:?}: {all:?}"
+        );
+    };
+    let slump = pairs("slump_3d.yaml");
+    has(&slump, "closed_form_radius_m", Some("spread_radius_mean_m"));
+    has(
+        &slump,
+        "closed_form_height_r50_m",
+        Some("surface_height_r50_m"),
+    );
+    let layer = pairs("inclined_layer.yaml");
+    has(&layer, "closed_form_plug_speed_m_s", Some("plug_speed_m_s"));
+    has(&layer, "closed_form_critical_depth_m", None);
+    has(
+        &pairs("column_collapse_2d.yaml"),
+        "closed_form_heap_length_m",
+        Some("heap_length_m"),
+    );
+    has(
+        &pairs("l_box_3d.yaml"),
+        "closed_form_height_x25_m",
+        Some("surface_height_x25_m"),
+    );
+    has(
+        &pairs("rockfill_2d.yaml"),
+        "closed_form_surface_slope",
+        Some("surface_slope"),
+    );
+    assert!(pairs("dam_break_2d.yaml").is_empty());
 }

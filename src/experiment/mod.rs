@@ -99,6 +99,11 @@ pub trait Experiment {
     fn flow_measures(&self) -> &'static [&'static str] {
         &[]
     }
+    /// The measured metric a closed-form metric `closed` (`closed_form_*`) stands beside,
+    /// where its name does not say it (see [`closed_form_pairs`]).
+    fn measured_for(&self, _closed: &str) -> Option<&'static str> {
+        None
+    }
     /// Sections of a state as cells (the rock fill's concrete, rock and empty void), drawn
     /// by the report; none for most tests.
     fn cell_maps<const D: usize>(&self, _m: &Manifest, _particles: &Particles<D>) -> Vec<CellMap> {
@@ -286,6 +291,26 @@ pub struct Crossing {
     pub metric: &'static str,
     pub threshold: f64,
     pub since_s: f64,
+}
+
+/// Each closed-form metric of `m`'s test with the measured metric it stands beside: for
+/// `closed_form_X` the test's own choice ([`Experiment::measured_for`]), else `X`, else
+/// `surface_X`, where the test reports one; `None` for a closed form with no measured twin
+/// (the inclined layer's critical depth).
+pub fn closed_form_pairs(m: &Manifest) -> Vec<(String, Option<String>)> {
+    let names = metric_names(m);
+    names
+        .iter()
+        .filter_map(|closed| {
+            let x = closed.strip_prefix("closed_form_")?;
+            let own = with_experiment!(&m.scene, e => e.measured_for(closed)).map(str::to_string);
+            let measured = own
+                .into_iter()
+                .chain([x.to_string(), format!("surface_{x}")])
+                .find(|n| names.contains(n));
+            Some((closed.clone(), measured))
+        })
+        .collect()
 }
 
 /// A metadata record of a run file: its name and its (key, value) entries.

@@ -885,7 +885,8 @@ impl<const D: usize> Voxels<D> {
     /// How fast the surface falls with the distance along x from the first pour: the
     /// least-squares slope of the columns' surface heights against |x - x_pour|, over the
     /// columns whose surface lies inside the bed zone (concrete there, below the zone's top),
-    /// negated (positive: falling away from the pour); 0 with fewer than three such columns.
+    /// negated (positive: falling away from the pour); NaN (no slope inside the bed) with
+    /// fewer than three such columns, e.g. when the concrete covers the bed.
     fn surface_slope(&self, heights: &[f64]) -> f64 {
         let l0 = self.spacing_m;
         let zone_top = self.n[D - 1] as f64 * l0;
@@ -904,7 +905,7 @@ impl<const D: usize> Voxels<D> {
         }
         let spread = n * sxx - sx * sx;
         if n < 3.0 || spread <= 0.0 {
-            return 0.0;
+            return f64::NAN;
         }
         -(n * sxy - sx * sy) / spread
     }

@@ -132,6 +132,11 @@ impl Experiment for Slump {
         domain::<D>(self, m.spacing_m)
     }
 
+    /// Roussel & Coussot's radius is the mean spread radius's closed form.
+    fn measured_for(&self, closed: &str) -> Option<&'static str> {
+        (closed == "closed_form_radius_m").then_some("spread_radius_mean_m")
+    }
+
     fn metric_names(&self, m: &Manifest) -> Vec<&'static str> {
         let mut names = vec![
             "spread_radius_mean_m",

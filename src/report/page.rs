@@ -198,6 +198,7 @@ fn run_report(path: &Path, options: &ReportOptions) -> Result<Report> {
 
     let title = format!("Run report: {}", super::run_title(&run));
     let mut body = String::new();
+    summary_html(&mut body, &info, &run);
     facts_html(&mut body, &info);
     metrics_html(&mut body, &info);
     if let Some((label, table)) = stage_table {
@@ -324,27 +325,89 @@ fn number(v: f64) -> String {
     }
 }
 
-fn facts_html(out: &mut String, info: &RunInfo) {
+/// The page's opening table: the experiment, its hash, how it ended, and each result metric
+/// of the test beside its closed form and the relative error where it has one.
+fn summary_html(out: &mut String, info: &RunInfo, run: &crate::record::RunFile) {
     let or_dash = |v: &Option<String>| v.clone().unwrap_or_else(|| "-".into());
-    let mut rows: Vec<(&str, String)> = vec![
-        ("file", info.file.clone()),
+    let ended = match (&info.outcome, &info.reason) {
+        (Some(o), Some(r)) if !r.is_empty() => format!("{o}: {r}"),
+        (Some(o), _) => o.clone(),
+        (None, _) => "-".into(),
+    };
+    let stop = info
+        .stop_rule
+        .clone()
+        .filter(|s| !s.is_empty())
+        .unwrap_or_else(|| "the end time".into());
+    out.push_str("<h2>Summary</h2><table class=\"facts\">");
+    for (k, v) in [
         ("experiment", or_dash(&info.experiment)),
         ("experiment SHA-256", or_dash(&info.experiment_sha256)),
-        (
-            "outcome",
-            match (&info.outcome, &info.reason) {
-                (Some(o), Some(r)) if !r.is_empty() => format!("{o}: {r}"),
-                (Some(o), _) => o.clone(),
-                (None, _) => "-".into(),
-            },
-        ),
-        (
-            "stopped by",
-            info.stop_rule
-                .clone()
-                .filter(|s| !s.is_empty())
-                .unwrap_or_else(|| "the end time".into()),
-        ),
+        ("outcome", ended),
+        ("stopped by", stop),
+    ] {
+        let _ = write!(out, "<tr><th>{}</th><td>{}</td></tr>", esc(k), esc(&v));
+    }
+    out.push_str("</table>");
+    let Ok(resolved) = crate::restore::manifest_of(run) else {
+        return;
+    };
+    let m = &resolved.manifest;
+    let pairs = crate::experiment::closed_form_pairs(m);
+    let closed: std::collections::BTreeSet<&str> = pairs.iter().map(|p| p.0.as_str()).collect();
+    let beside = |name: &str| {
+        pairs
+            .iter()
+            .find(|p| p.1.as_deref() == Some(name))
+            .map(|p| p.0.as_str())
+    };
+    let mut rows = Vec::new();
+    let own = crate::experiment::metric_names(m)
+        .into_iter()
+        .chain(crate::experiment::row_metric_names(m));
+    for name in own.filter(|n| !closed.contains(n.as_str())) {
+        let Some(&value) = info.metrics.get(&name) else {
+            continue;
+        };
+        let reference = beside(&name).and_then(|c| info.metrics.get(c).copied());
+        let error = reference
+            .map(|r| 100.0 * (value / r - 1.0))
+            .filter(|e| e.is_finite())
+            .map(|e| format!("{e:+.1} %"));
+        rows.push((name, value, reference, error));
+    }
+    // Closed forms with no measured twin stand alone.
+    for (c, measured) in &pairs {
+        if measured.is_none()
+            && let Some(&v) = info.metrics.get(c)
+        {
+            rows.push((c.clone(), v, None, None));
+        }
+    }
+    if rows.is_empty() {
+        return;
+    }
+    out.push_str(
+        "<table class=\"runs\"><tr><th>result</th><th>value</th><th>closed form</th><th>error</th></tr>",
+    );
+    for (name, value, reference, error) in rows {
+        let _ = write!(
+            out,
+            "<tr><th>{}</th><td>{}</td><td>{}</td><td>{}</td></tr>",
+            esc(&name),
+            esc(&number(value)),
+            esc(&reference.map_or(String::new(), number)),
+            esc(&error.unwrap_or_default())
+        );
+    }
+    out.push_str("</table>");
+}
+
+fn facts_html(out: &mut String, info: &RunInfo) {
+    let or_dash = |v: &Option<String>| v.clone().unwrap_or_else(|| "-".into());
+    // The experiment, its hash and how it ended open the page (the summary table).
+    let mut rows: Vec<(&str, String)> = vec![
+        ("file", info.file.clone()),
         (
             "simulated time",
             info.simulated_time_s
@@ -415,7 +478,7 @@ const STYLE: &str = "body{font-family:sans-serif;margin:2em auto;max-width:1200p
 h1{font-size:1.5em}h2{font-size:1.2em;border-bottom:1px solid #ccc;margin-top:1.5em}\
 table{border-collapse:collapse;font-size:.9em}th,td{border:1px solid #ddd;padding:.25em .6em;\
 text-align:left;vertical-align:top}table.facts th{background:#f4f4f4;white-space:nowrap}\
-table.runs th{background:#f4f4f4}div.wide{overflow-x:auto}div.figures{display:grid;grid-template-columns:repeat(auto-fill,minmax(540px,1fr));gap:1em}\
+table.runs th{background:#f4f4f4}table+table{margin-top:1em}div.wide{overflow-x:auto}div.figures{display:grid;grid-template-columns:repeat(auto-fill,minmax(540px,1fr));gap:1em}\
 figure{margin:0}figure img{width:100%;border:1px solid #eee}figcaption{font-size:.9em;color:#555}\
 ul.skipped{color:#a00}";
 

@@ -140,7 +140,11 @@ pub fn line_plot(
         let color = PALETTE[i % PALETTE.len()];
         let drawn = chart
             .draw_series(LineSeries::new(
-                s.points.iter().copied(),
+                // A metric undefined at some points (NaN) is drawn where it is defined.
+                s.points
+                    .iter()
+                    .copied()
+                    .filter(|(x, y)| x.is_finite() && y.is_finite()),
                 color.stroke_width(2),
             ))
             .map_err(|x| e(&x))?;
@@ -149,7 +153,12 @@ pub fn line_plot(
             .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 14, y + 5)], color.filled()));
         if markers {
             chart
-                .draw_series(s.points.iter().map(|&p| Circle::new(p, 4, color.filled())))
+                .draw_series(
+                    s.points
+                        .iter()
+                        .filter(|(x, y)| x.is_finite() && y.is_finite())
+                        .map(|&p| Circle::new(p, 4, color.filled())),
+                )
                 .map_err(|x| e(&x))?;
         }
     }
