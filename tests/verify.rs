@@ -151,6 +151,10 @@ fn every_experiment_verifies_at_coarse_spacing() {
                 "scene.stroke_bottom_m=0.025",
             ]);
         }
+        if name == "rockfill_2d.yaml" || name == "rockfill_sweep.yaml" {
+            // Rocks at least two spacings across: both classes of 60 mm.
+            sets.push("scene.bed.sizes.0.diameter_m=0.06");
+        }
         if name == "inclined_layer.yaml" {
             // The periodic cell must hold three list cells: 3 (3.1 + 0.5) 25 mm = 0.27 m.
             sets.push("scene.period_m=0.3");
