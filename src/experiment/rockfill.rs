@@ -78,6 +78,10 @@ pub struct Rockfill {
     pub layers: u32,
     /// `time_to_fill_s` is the time at which `filled_fraction` first reaches this.
     pub fill_threshold: f64,
+    /// The deposited bed, built once per run.
+    #[serde(skip)]
+    bed_cache: Cache,
+    /// The metrics' voxel grid, built once per run.
     #[serde(skip)]
     prepared: Cache,
 }
@@ -162,6 +166,7 @@ impl Default for Rockfill {
             }],
             layers: 4,
             fill_threshold: 0.95,
+            bed_cache: Cache::default(),
             prepared: Cache::default(),
         }
     }
@@ -628,9 +633,10 @@ impl Rockfill {
         }
     }
 
-    /// The bed (deposited anew: it depends on the scene only, not on the spacing).
-    pub fn deposit<const D: usize>(&self) -> Bed<D> {
-        self.deposition::<D>().deposit()
+    /// The bed (deposited once per run: it depends on the scene only, not on the spacing).
+    pub fn deposit<const D: usize>(&self) -> Arc<Bed<D>> {
+        let deposition = self.deposition::<D>();
+        self.bed_cache.get_or(deposition.clone(), || deposition.deposit())
     }
 
     /// Porosity of the bed zone (the form's nominal footprint up to the bed's height): one
@@ -680,23 +686,36 @@ impl Rockfill {
 
     /// The voxel grid of this scene at `spacing_m`, built once per run.
     fn prepared<const D: usize>(&self, spacing_m: f64) -> Arc<Voxels<D>> {
-        let mut slot = self.prepared.0.lock().unwrap_or_else(|e| e.into_inner());
-        if let Some((s, any)) = slot.as_ref()
-            && *s == spacing_m
-            && let Ok(v) = Arc::clone(any).downcast::<Voxels<D>>()
-        {
-            return v;
-        }
-        let v = Arc::new(Voxels::<D>::new(self, spacing_m));
-        *slot = Some((spacing_m, v.clone() as Arc<dyn Any + Send + Sync>));
-        v
+        let key = (spacing_m, self.deposition::<D>());
+        self.prepared.get_or(key, || Voxels::<D>::new(self, spacing_m))
     }
 }
 
-/// A per-run cache (the voxel grid of the metrics); empty in every copy, ignored by
-/// comparisons, never serialised.
+/// A per-run cache of one value built from a key (the bed, the voxel grid); empty in every
+/// copy, ignored by comparisons, never serialised. The key (what the value is built from)
+/// is kept beside it, so a scene changed in place never reads a stale value.
 #[derive(Default)]
-struct Cache(Mutex<Option<(f64, Arc<dyn Any + Send + Sync>)>>);
+struct Cache(Mutex<Option<Arc<dyn Any + Send + Sync>>>);
+
+impl Cache {
+    /// The value built from `key`, built by `make` on the first call (or after `key` changed).
+    fn get_or<K, T>(&self, key: K, make: impl FnOnce() -> T) -> Arc<T>
+    where
+        K: PartialEq + Send + Sync + 'static,
+        T: Send + Sync + 'static,
+    {
+        let mut slot = self.0.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(any) = slot.as_ref()
+            && let Some((k, v)) = any.downcast_ref::<(K, Arc<T>)>()
+            && *k == key
+        {
+            return Arc::clone(v);
+        }
+        let v = Arc::new(make());
+        *slot = Some(Arc::new((key, Arc::clone(&v))));
+        v
+    }
+}
 
 impl Clone for Cache {
     fn clone(&self) -> Self {
