@@ -113,10 +113,20 @@ fn run_report(path: &Path, options: &ReportOptions) -> Result<Report> {
     };
 
     // Diagnostics against time: each experiment metric (shares together), then the built-ins.
+    // A metric with the same bits in every row (a closed form, a bed's porosity) is no curve:
+    // it stands in the summary table.
+    let varies = |name: &String| {
+        let mut values = run
+            .diagnostics
+            .iter()
+            .map(|d| d.metrics.get(name).map(|v| v.to_bits()));
+        let first = values.next().flatten();
+        run.diagnostics.len() < 2 || values.any(|v| v != first)
+    };
     let names: Vec<String> = run
         .diagnostics
         .first()
-        .map(|d| d.metrics.keys().cloned().collect())
+        .map(|d| d.metrics.keys().filter(|n| varies(n)).cloned().collect())
         .unwrap_or_default();
     let mut groups = metric_groups(&names);
     groups.push(vec!["kinetic_energy_j".into()]);
