@@ -149,6 +149,52 @@ fn the_void_metrics_count_what_they_should() {
     assert!(metrics["filled_fraction"] < 1.0);
 }
 
+/// The covering sweep's two ends at 10 mm (`rockfill_cover_sweep.yaml`, docs/rockfill.md
+/// "The covering sweep"): the 2D bed and its concrete poured at the left end, 7 cm above the
+/// bed. At 20 Pa the pour runs out and fills the bed; at 350 Pa the heap under the inlet
+/// rises to it, the pour stalls and the far end stays empty (measured at 10 mm: 0.987 filled
+/// against 0.462, half the volume poured).
+#[test]
+fn a_stiff_concrete_poured_at_one_end_stalls_and_leaves_the_bed_partly_empty() {
+    let dir = tempfile::tempdir().unwrap();
+    let pour = |tau_pa: &str| {
+        let tau = format!("fluid.yield_stress_pa={tau_pa}");
+        let sets = [
+            "spacing_m=0.01",
+            "scene.pours.0.centre_m.0=0.03",
+            "time.end_s=10",
+            &tau,
+        ];
+        let resolved = common::resolve("rockfill_2d.yaml", &sets);
+        let l0 = resolved.manifest.spacing_m;
+        let volume = spec(&resolved.manifest).pours[0].volume_m3;
+        let metrics = common::run_completed(&resolved, dir.path(), 2)
+            .summary
+            .metrics;
+        // Every particle the inlet let in is in the form.
+        let poured = metrics["poured_volume_m3"];
+        assert_eq!(
+            metrics["fluid_particle_count"],
+            (poured / (l0 * l0)).round(),
+            "{metrics:?}"
+        );
+        (metrics["filled_fraction"], poured / volume)
+    };
+    let (soft_fill, soft_poured) = pour("20");
+    let (stiff_fill, stiff_poured) = pour("350");
+    assert_eq!(soft_poured, 1.0, "20 Pa pours all of it");
+    assert!(soft_fill >= 0.95, "20 Pa fills the bed: {soft_fill}");
+    // A yield stress the flow ignored would pour and fill as the soft one does.
+    assert!(
+        stiff_poured < 0.75,
+        "350 Pa heaps up to the inlet: {stiff_poured} of it poured"
+    );
+    assert!(
+        stiff_fill < 0.7,
+        "350 Pa leaves the far end empty: {stiff_fill}"
+    );
+}
+
 #[test]
 fn a_low_yield_stress_fills_the_2d_bed_and_loses_nothing() {
     let dir = tempfile::tempdir().unwrap();
