@@ -166,23 +166,21 @@ fn a_stiff_concrete_poured_at_one_end_stalls_and_leaves_the_bed_partly_empty() {
             &tau,
         ];
         let resolved = common::resolve("rockfill_2d.yaml", &sets);
-        let l0 = resolved.manifest.spacing_m;
         let volume = spec(&resolved.manifest).pours[0].volume_m3;
         let metrics = common::run_completed(&resolved, dir.path(), 2)
             .summary
             .metrics;
-        // Every particle the inlet let in is in the form.
+        // Nothing left the domain, so the fluid in the form is what the inlet let in.
+        assert_eq!(metrics["ghost_particle_count"], 0.0, "{metrics:?}");
         let poured = metrics["poured_volume_m3"];
-        assert_eq!(
-            metrics["fluid_particle_count"],
-            (poured / (l0 * l0)).round(),
-            "{metrics:?}"
-        );
         (metrics["filled_fraction"], poured / volume)
     };
     let (soft_fill, soft_poured) = pour("20");
     let (stiff_fill, stiff_poured) = pour("350");
-    assert_eq!(soft_poured, 1.0, "20 Pa pours all of it");
+    assert!(
+        (soft_poured - 1.0).abs() < 1e-9,
+        "20 Pa pours all of it: {soft_poured}"
+    );
     assert!(soft_fill >= 0.95, "20 Pa fills the bed: {soft_fill}");
     // A yield stress the flow ignored would pour and fill as the soft one does.
     assert!(
