@@ -151,8 +151,8 @@ fn every_experiment_verifies_at_coarse_spacing() {
                 "scene.stroke_bottom_m=0.025",
             ]);
         }
-        if name == "rockfill_2d.yaml" || name == "rockfill_sweep.yaml" {
-            // Rocks at least two spacings across: both classes of 60 mm.
+        if name.starts_with("rockfill_") && name != "rockfill_3d.yaml" {
+            // The 2D beds: rocks at least two spacings across, both classes of 60 mm.
             sets.push("scene.bed.sizes.0.diameter_m=0.06");
         }
         if name == "inclined_layer.yaml" {
