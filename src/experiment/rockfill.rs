@@ -684,9 +684,10 @@ impl Rockfill {
             .collect()
     }
 
-    /// The voxel grid of this scene at `spacing_m`, built once per run.
+    /// The voxel grid of this scene at `spacing_m`, built once per run. It depends on the
+    /// whole scene (the bed, the layers, the pours), so the whole scene is its key.
     fn prepared<const D: usize>(&self, spacing_m: f64) -> Arc<Voxels<D>> {
-        let key = (spacing_m, self.deposition::<D>());
+        let key = (spacing_m, self.clone());
         self.prepared.get_or(key, || Voxels::<D>::new(self, spacing_m))
     }
 }
