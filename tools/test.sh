@@ -14,7 +14,8 @@ if [ ! -d tools/foxglove/node_modules ]; then
     npm ci --prefix tools/foxglove --no-audit --no-fund --silent
 fi
 cargo test --release -- --include-ignored
-cargo build --release --bin runner
+# `cargo test` has built target/release/runner for the integration tests; a separate `cargo
+# build` would compile the library once more (without the dev-dependencies' features).
 
 # Determinism gate (docs/cli.md "Verify, resume, interrupts"): a small run on 1 and on 2 threads,
 # each replayed bit for bit by `runner verify`, and their checkpoint hashes compared.
