@@ -122,6 +122,10 @@ const CASES: &[(&[&str], &str)] = &[
         "mps.wall_layers: must be <= 10",
     ),
     (
+        &["--set", "mps.solid_wall_layers=100000"],
+        "mps.solid_wall_layers: must be <= 10",
+    ),
+    (
         &["--set", "spacing_m=1e-12"],
         "scene.tank_width_m: must be <= 2^24 * spacing_m",
     ),

@@ -76,10 +76,21 @@ const CASES: &[(&str, &[&str], &str)] = &[
     ),
     // The L-B box (added with it): 25 mm, 0.5 s of the pour (80 particles in, the first of
     // them spread on the floor of the vertical part). Re-minted when the default spheres
-    // moved 200 mm apart (their wall particles are part of the state).
+    // moved 200 mm apart (their wall particles are part of the state), and again when the
+    // manifest gave its spheres two wall layers (`mps.solid_wall_layers: 2`: concrete got
+    // through a one-layer shell); with one, the value before.
     (
         "lb_box_3d.yaml",
         &["spacing_m=0.025", "time.end_s=0.5"],
+        "2e603ad745262b51fc3cf23bb987738c60bb69f109c7b2890baa135d9dd9b19d",
+    ),
+    (
+        "lb_box_3d.yaml",
+        &[
+            "spacing_m=0.025",
+            "time.end_s=0.5",
+            "mps.solid_wall_layers=1",
+        ],
         "a01b4eacbd220e1dfd01032798b7f8f48823d3b7188bd8ec7da7f63cfd775ec9",
     ),
 ];

@@ -21,7 +21,8 @@ fn scene_geometry() {
     let scene = build_scene::<3>(&m);
     let p = &scene.particles;
     assert_eq!(p.fluid_count(), 0, "the box starts empty");
-    let layers = f64::from(m.mps.wall_layers + m.mps.dummy_layers);
+    // The spheres' shells: the solids' wall layers (two in the manifest) and the dummies.
+    let layers = f64::from(m.mps.wall_layers_of_solids() + m.mps.dummy_layers);
     let r = 0.5 * b.sphere_diameter_m;
     let (length, width) = (b.vertical_width_m + b.channel_length_m, b.width_m);
     let mut in_spheres = 0u32;

@@ -385,6 +385,20 @@ fn hash_changes_with_every_value() {
         assert!(!seen.contains(&h), "hash did not change for {to}");
         seen.push(h);
     }
+    // The solids' wall layers: null is the rule before the field (the hash of a manifest
+    // without it), a number changes the experiment.
+    let null = ok(&edit(
+        FULL,
+        "dummy_layers: 2",
+        "dummy_layers: 2\n  solid_wall_layers: null",
+    ));
+    assert_eq!(null.hash_hex, base.hash_hex);
+    let two = ok(&edit(
+        FULL,
+        "dummy_layers: 2",
+        "dummy_layers: 2\n  solid_wall_layers: 2",
+    ));
+    assert!(!seen.contains(&two.hash_hex));
     // the smallest change of a float shows
     let next = f64::from_bits(0.01f64.to_bits() + 1);
     let h = ok(&edit(
@@ -683,6 +697,30 @@ fn invalid_values_are_named_and_located() {
         "mps.wall_layers",
         Some(pos_of(&text, "0}", 0)),
         &[">= 1"],
+    );
+    // The solids' wall layers: at least one, and with the dummies deep enough for the
+    // Laplacian (3.1 spacings: 3 layers), named apart from the container's.
+    let text = edit(
+        MINIMAL,
+        "spacing_m: 0.01\n",
+        "spacing_m: 0.01\nmps: {solid_wall_layers: 0}\n",
+    );
+    assert_invalid(
+        &err(&text),
+        "mps.solid_wall_layers",
+        Some(pos_of(&text, "0}", 0)),
+        &[">= 1"],
+    );
+    let text = edit(
+        MINIMAL,
+        "spacing_m: 0.01\n",
+        "spacing_m: 0.01\nmps: {wall_layers: 2, dummy_layers: 1, solid_wall_layers: 1}\n",
+    );
+    assert_invalid(
+        &err(&text),
+        "mps.solid_wall_layers",
+        Some(pos_of(&text, "1}", 0)),
+        &["1 + 1 = 2"],
     );
 
     // The pressure regularisation: its radius between the first and the second shell, and

@@ -137,7 +137,7 @@ pub fn apply<const D: usize>(m: &Manifest, scene: &mut Scene<D>) {
     if b.is_empty() {
         return;
     }
-    let (walls, dummies) = (m.mps.wall_layers, m.mps.dummy_layers);
+    let (walls, dummies) = (m.mps.wall_layers_of_solids(), m.mps.dummy_layers);
     let p = &mut scene.particles;
 
     // Tags of the initial fluid: later regions win.

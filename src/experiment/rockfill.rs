@@ -321,7 +321,7 @@ impl Experiment for Rockfill {
                 &mut particles,
                 &sphere,
                 l0,
-                m.mps.wall_layers,
+                m.mps.wall_layers_of_solids(),
                 m.mps.dummy_layers,
                 &mut taken,
             );

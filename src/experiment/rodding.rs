@@ -331,7 +331,7 @@ impl Experiment for Rodding {
                 &solid,
                 scan,
                 l0,
-                m.mps.wall_layers,
+                m.mps.wall_layers_of_solids(),
                 m.mps.dummy_layers,
             );
         }

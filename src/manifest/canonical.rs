@@ -108,6 +108,7 @@ pub fn canonical_text<S: SceneSection>(manifest: &Manifest<S>) -> String {
     for (section, key) in [
         ("mps", "wall_collision_distance"),
         ("mps", "wall_collision_second_pass"),
+        ("mps", "solid_wall_layers"),
         ("time", "dt_min_s"),
         ("stop", "max_ghost_particles"),
         ("scene", "rod_slip_length_m"),

@@ -333,6 +333,19 @@ pub struct Mps {
     /// Dummy particle layers behind the wall (count in the number density only).
     #[serde(default = "default_dummy_layers")]
     pub dummy_layers: u32,
+    /// Wall layers of the scene's solids (obstacles, bodies, the L-B box's spheres, the rock
+    /// bed's rocks, the rodding rod); null: `wall_layers`. A sphere's one-layer shell on the
+    /// lattice has gaps wider than a flat wall's (docs/rockfill.md); two close them without
+    /// thickening the container's walls.
+    #[serde(default)]
+    pub solid_wall_layers: Option<u32>,
+}
+
+impl Mps {
+    /// The wall layers a solid gets: `solid_wall_layers`, else `wall_layers`.
+    pub fn wall_layers_of_solids(&self) -> u32 {
+        self.solid_wall_layers.unwrap_or(self.wall_layers)
+    }
 }
 
 impl Default for Mps {
@@ -370,6 +383,7 @@ impl Default for Mps {
             viscosity_max_iterations: default_viscosity_max_iterations(),
             wall_layers: default_wall_layers(),
             dummy_layers: default_dummy_layers(),
+            solid_wall_layers: None,
         }
     }
 }

@@ -286,9 +286,14 @@ pub fn check<S: SceneSection>(m: &Manifest<S>) -> Vec<Issue> {
     // More layers than the Laplacian reaches (4 at most) only add particles; the bound keeps
     // every build, the size estimate's coarse ones included, to the scene's own size (1e5
     // layers aborted allocating them).
+    let solid_ok = match p.solid_wall_layers {
+        Some(n) => c.int_at_least("mps.solid_wall_layers", n.into(), 1),
+        None => true,
+    };
     for (field, layers) in [
         ("mps.wall_layers", p.wall_layers),
         ("mps.dummy_layers", p.dummy_layers),
+        ("mps.solid_wall_layers", p.wall_layers_of_solids()),
     ] {
         if layers > MAX_LAYERS {
             c.fail(field, format!("must be <= {MAX_LAYERS}, got {layers}"));
@@ -306,6 +311,18 @@ pub fn check<S: SceneSection>(m: &Manifest<S>) -> Vec<Issue> {
                     "mps.wall_layers + mps.dummy_layers must be >= ceil(mps.laplacian_radius) - 1 = {}, got {} + {} = {have}",
                     fmt_num(needed),
                     p.wall_layers,
+                    p.dummy_layers
+                ),
+            );
+        }
+        let solid = u64::from(p.wall_layers_of_solids()) + u64::from(p.dummy_layers);
+        if solid_ok && (solid as f64) < needed {
+            c.fail(
+                "mps.solid_wall_layers",
+                format!(
+                    "mps.solid_wall_layers + mps.dummy_layers must be >= ceil(mps.laplacian_radius) - 1 = {}, got {} + {} = {solid}",
+                    fmt_num(needed),
+                    p.wall_layers_of_solids(),
                     p.dummy_layers
                 ),
             );
