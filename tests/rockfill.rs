@@ -274,8 +274,9 @@ fn a_low_yield_stress_fills_the_2d_bed_and_loses_nothing() {
 /// The shipped 3D rock fill at 20 mm, poured for 2 s: every particle the inlet let in is in the
 /// form, and none gets into a rock (issue 30, item 2). A sphere's shell of one wall layer has
 /// gaps wider than a flat wall's (`tests/shapes.rs`); the manifest's two layers close them.
-/// Measured at commit 8bff1ed to 3 s: with two layers the deepest concrete particle sits
-/// 0.68 l0 inside a rock's nominal surface (in the lattice staircase); with one
+/// Measured at commit 4f20330 to 3 s: with two layers (`mps.solid_wall_layers: 2`) the deepest
+/// concrete particle sits 0.68 l0 inside a rock's nominal surface (in the lattice staircase;
+/// the same with every wall doubled); with one
 /// (`mps.wall_layers=1`) 1.46 l0 at 0.5 s and 2.66 l0 at 3 s, 67 particles past 0.5 l0. The
 /// form holds it too (a particle pressed 0.09 l0 into the floor's face, short of its wall
 /// particles' centres).
