@@ -293,7 +293,7 @@ pub fn check<S: SceneSection>(m: &Manifest<S>) -> Vec<Issue> {
     for (field, layers) in [
         ("mps.wall_layers", p.wall_layers),
         ("mps.dummy_layers", p.dummy_layers),
-        ("mps.solid_wall_layers", p.wall_layers_of_solids()),
+        ("mps.solid_wall_layers", p.solid_wall_layers.unwrap_or(0)),
     ] {
         if layers > MAX_LAYERS {
             c.fail(field, format!("must be <= {MAX_LAYERS}, got {layers}"));
@@ -315,8 +315,9 @@ pub fn check<S: SceneSection>(m: &Manifest<S>) -> Vec<Issue> {
                 ),
             );
         }
+        // Checked only where written: null is `wall_layers`, checked above.
         let solid = u64::from(p.wall_layers_of_solids()) + u64::from(p.dummy_layers);
-        if solid_ok && (solid as f64) < needed {
+        if p.solid_wall_layers.is_some() && solid_ok && (solid as f64) < needed {
             c.fail(
                 "mps.solid_wall_layers",
                 format!(
