@@ -276,9 +276,8 @@ fn a_low_yield_stress_fills_the_2d_bed_and_loses_nothing() {
 /// gaps wider than a flat wall's (`tests/shapes.rs`); the manifest's two layers close them.
 /// Measured at commit 4f20330 to 3 s: with two layers (`mps.solid_wall_layers: 2`) the deepest
 /// concrete particle sits 0.68 l0 inside a rock's nominal surface (in the lattice staircase;
-/// the same with every wall doubled); with one
-/// (`mps.wall_layers=1`) 1.46 l0 at 0.5 s and 2.66 l0 at 3 s, 67 particles past 0.5 l0. The
-/// form holds it too (a particle pressed 0.09 l0 into the floor's face, short of its wall
+/// the same with every wall doubled); with one (`mps.solid_wall_layers=1`) 1.46 l0 at 0.5 s
+/// and 2.66 l0 at 3 s, 67 particles past 0.5 l0, and this test fails. The form holds it too (a particle pressed 0.09 l0 into the floor's face, short of its wall
 /// particles' centres).
 #[test]
 fn the_3d_rocks_keep_the_concrete_out() {
@@ -300,6 +299,11 @@ fn the_3d_rocks_keep_the_concrete_out() {
     let bed = r.deposit::<3>();
     let run = read_run(&result.path).unwrap();
     assert!(run.states.len() >= 4, "{} checkpoints", run.states.len());
+    // The form's first wall layer has its centres l0/2 behind its inner faces.
+    let (lo, hi) = (
+        -0.5 * l0,
+        [r.form_length_m + 0.5 * l0, r.form_width_m + 0.5 * l0],
+    );
     for s in &run.states {
         let mut deepest = f64::NEG_INFINITY;
         for i in (0..s.kind.len()).filter(|&i| s.kind[i] == 0) {
@@ -307,11 +311,6 @@ fn the_3d_rocks_keep_the_concrete_out() {
             for rock in &bed.rocks {
                 deepest = deepest.max(rock.radius_m - (x - rock.centre_m).norm());
             }
-            // The form's first wall layer has its centres l0/2 behind its inner faces.
-            let (lo, hi) = (
-                -0.5 * l0,
-                [r.form_length_m + 0.5 * l0, r.form_width_m + 0.5 * l0],
-            );
             assert!(
                 (0..2).all(|a| x[a] > lo && x[a] < hi[a]) && x[2] > lo,
                 "fluid {i} at {x} out of the form"

@@ -286,10 +286,9 @@ pub fn check<S: SceneSection>(m: &Manifest<S>) -> Vec<Issue> {
     // More layers than the Laplacian reaches (4 at most) only add particles; the bound keeps
     // every build, the size estimate's coarse ones included, to the scene's own size (1e5
     // layers aborted allocating them).
-    let solid_ok = match p.solid_wall_layers {
-        Some(n) => c.int_at_least("mps.solid_wall_layers", n.into(), 1),
-        None => true,
-    };
+    let solid_ok = p
+        .solid_wall_layers
+        .is_none_or(|n| c.int_at_least("mps.solid_wall_layers", n.into(), 1));
     for (field, layers) in [
         ("mps.wall_layers", p.wall_layers),
         ("mps.dummy_layers", p.dummy_layers),
@@ -316,17 +315,20 @@ pub fn check<S: SceneSection>(m: &Manifest<S>) -> Vec<Issue> {
             );
         }
         // Checked only where written: null is `wall_layers`, checked above.
-        let solid = u64::from(p.wall_layers_of_solids()) + u64::from(p.dummy_layers);
-        if p.solid_wall_layers.is_some() && solid_ok && (solid as f64) < needed {
-            c.fail(
-                "mps.solid_wall_layers",
-                format!(
-                    "mps.solid_wall_layers + mps.dummy_layers must be >= ceil(mps.laplacian_radius) - 1 = {}, got {} + {} = {solid}",
-                    fmt_num(needed),
-                    p.wall_layers_of_solids(),
-                    p.dummy_layers
-                ),
-            );
+        if let Some(n) = p.solid_wall_layers
+            && solid_ok
+        {
+            let solid = u64::from(n) + u64::from(p.dummy_layers);
+            if (solid as f64) < needed {
+                c.fail(
+                    "mps.solid_wall_layers",
+                    format!(
+                        "mps.solid_wall_layers + mps.dummy_layers must be >= ceil(mps.laplacian_radius) - 1 = {}, got {n} + {} = {solid}",
+                        fmt_num(needed),
+                        p.dummy_layers
+                    ),
+                );
+            }
         }
     }
 
