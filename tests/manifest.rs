@@ -723,19 +723,17 @@ fn invalid_values_are_named_and_located() {
         &["1 + 1 = 2"],
     );
     // Unwritten, the field is `wall_layers` and is not blamed for it (every issue listed).
+    let fields = |m: &manifest::Manifest<_>| -> Vec<String> {
+        manifest::validate::check(m)
+            .into_iter()
+            .map(|i| i.field)
+            .collect()
+    };
     let mut m = ok(MINIMAL).manifest;
     m.mps.wall_layers = 11;
-    let fields: Vec<String> = manifest::validate::check(&m)
-        .into_iter()
-        .map(|i| i.field)
-        .collect();
-    assert_eq!(fields, ["mps.wall_layers"]);
+    assert_eq!(fields(&m), ["mps.wall_layers"]);
     m.mps.solid_wall_layers = Some(11);
-    let fields: Vec<String> = manifest::validate::check(&m)
-        .into_iter()
-        .map(|i| i.field)
-        .collect();
-    assert_eq!(fields, ["mps.wall_layers", "mps.solid_wall_layers"]);
+    assert_eq!(fields(&m), ["mps.wall_layers", "mps.solid_wall_layers"]);
 
     // The pressure regularisation: its radius between the first and the second shell, and
     // 2D only (measured unstable in 3D).
