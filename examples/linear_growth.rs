@@ -12,7 +12,7 @@
 //! difference quotient would see as a growing mode), 2000 iterations, dt 1e-3 s.
 //! The state is every fluid particle's velocity, pressure and position; the rest state
 //! starts from the hydrostatic pressure rho g (y_top - y), an exact fixed point.
-#[path = "../tests/core_setup/mod.rs"]
+#[path = "../tests/integration/core_setup.rs"]
 mod core_setup;
 
 use core_setup::{config, walled_box};

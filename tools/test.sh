@@ -9,7 +9,7 @@ if [ ! -x .venv/bin/python ]; then
 fi
 .venv/bin/pip install --quiet --disable-pip-version-check -r tools/requirements.txt
 export MPS_PYTHON="$PWD/.venv/bin/python"
-# The viewers' decoder (protobufjs, @mcap/core) for tests/foxglove.rs, pinned by its lock file.
+# The viewers' decoder (protobufjs, @mcap/core) for tests/integration/foxglove.rs, pinned by its lock file.
 if [ ! -d tools/foxglove/node_modules ]; then
     npm ci --prefix tools/foxglove --no-audit --no-fund --silent
 fi

@@ -1,0 +1,197 @@
+//! The inclined layer (`experiments/inclined_layer.yaml`, issue "A quiet core"): a Bingham
+//! layer on a plane inclined at 5 degrees, periodic along the slope. Closed form: rigid for
+//! h <= h_c = tau_0 / (rho g sin theta) = 50.9 mm; above, a plug moving at
+//! U = rho g sin(theta) (h - h_c)^2 / (2 mu_p). Under the incremental scheme, 10 mm.
+//!
+//! Our walls hold zero velocity at the wall particles' centres, l0/2 below the floor's top
+//! (y = 0, where the closed form puts it): the layer shears as one l0/2 deeper. Measured plug
+//! speed against the nominal closed form at 10, 5 and 2.5 mm: +20.1, +12.8, +5.2 %; against
+//! the closed form for h + l0/2: -1.0, +2.2, +0.1 % (docs/validation.md, "Holding still"). With
+//! `mps.wall_surface_no_slip` the no-slip condition holds at the floor's top instead.
+use crate::common;
+
+/// rho g sin(theta) for the shipped fluid and slope.
+fn driving_pa_m() -> f64 {
+    2300.0 * 9.81 * (5.0f64).to_radians().sin()
+}
+
+/// The plug speed of every diagnostics row of the run at `path` from `from_s` on.
+fn plug_speeds_after(path: &std::path::Path, from_s: f64) -> Vec<f64> {
+    let run = mps_runner::record::read_run(path).unwrap();
+    run.diagnostics
+        .iter()
+        .filter(|d| d.time_s >= from_s)
+        .map(|d| d.metrics["plug_speed_m_s"])
+        .collect()
+}
+
+fn run(sets: &[&str], threads: usize) -> (mps_runner::run::RunResult, tempfile::TempDir) {
+    let mut all = vec![
+        "spacing_m=0.01",
+        "scene.period_m=0.12",
+        "mps.pressure_scheme=incremental",
+    ];
+    all.extend_from_slice(sets);
+    let resolved = common::resolve("inclined_layer.yaml", &all);
+    let dir = tempfile::tempdir().unwrap();
+    (common::run_completed(&resolved, dir.path(), threads), dir)
+}
+
+#[test]
+fn a_layer_twice_the_critical_depth_slides_on_a_sheared_zone_at_the_closed_form_speed() {
+    let (result, _dir) = run(&[], 2);
+    let metrics = &result.summary.metrics;
+    let (h, l0) = (0.1, 0.01);
+    let h_c = 100.0 / driving_pa_m();
+    assert!((metrics["closed_form_critical_depth_m"] / h_c - 1.0).abs() < 1e-12);
+    let nominal = driving_pa_m() * (h - h_c) * (h - h_c) / (2.0 * 50.0);
+    assert!((metrics["closed_form_plug_speed_m_s"] / nominal - 1.0).abs() < 1e-12);
+    // The plug rides on the sheared zone: the top moves as one (the fastest particle is in it).
+    let plug = metrics["plug_speed_m_s"];
+    assert!((metrics["fluid_max_speed_m_s"] / plug - 1.0).abs() < 0.01);
+    // No slip at the wall particles' centres: the sheared zone is h - h_c + l0/2. With 10 rows
+    // the yield surface moves as the sheared rows rearrange and the plug speed wanders by a
+    // few per cent (55-60.5 mm/s over 1-6 s; mean 57.2): its mean over [1.5, 3] s is compared.
+    let sheared = h - h_c + 0.5 * l0;
+    let expected = driving_pa_m() * sheared * sheared / (2.0 * 50.0);
+    let rows = plug_speeds_after(&result.path, 1.5);
+    assert!(rows.len() >= 100, "{} rows after 1.5 s", rows.len());
+    let mean = rows.iter().sum::<f64>() / rows.len() as f64;
+    assert!(
+        (mean / expected - 1.0).abs() < 0.05,
+        "mean plug {mean} m/s, closed form with the wall at its particles' centres {expected} m/s"
+    );
+    // No drift and no growing oscillation: every row within 6 % of the mean.
+    for v in &rows {
+        assert!(
+            (v / mean - 1.0).abs() < 0.06,
+            "plug {v} m/s, mean {mean} m/s"
+        );
+    }
+}
+
+#[test]
+fn a_layer_below_the_critical_depth_stays_rigid_and_replays_bit_for_bit() {
+    // h = 0.8 h_c (40 mm, 4 rows at 10 mm), 2 s. The regularised model creeps at the Nusselt
+    // speed of its unyielded viscosity mu_u = mu_p + tau_0 / (2 pi_c) = 10050 Pa s.
+    let (result, _dir) = run(&["scene.layer_depth_m=0.04", "time.end_s=2"], 2);
+    let metrics = &result.summary.metrics;
+    let speed = metrics["fluid_max_speed_m_s"];
+    assert!(speed < 1e-3, "max speed {speed} m/s");
+    assert!(metrics["non_flowing_fraction"] >= 0.99);
+    assert_eq!(metrics["closed_form_plug_speed_m_s"], 0.0);
+    let depth = 0.04 + 0.5 * 0.01;
+    let creep = driving_pa_m() * depth * depth / (2.0 * 10050.0);
+    let plug = metrics["plug_speed_m_s"];
+    assert!(
+        (plug / creep - 1.0).abs() < 0.1,
+        "plug {plug} m/s, creep at the unyielded viscosity {creep} m/s"
+    );
+    // The periodic seam and the tilted gravity keep the bits on any thread count.
+    common::assert_replays(&result.path, None);
+    let (one, _dir1) = run(&["scene.layer_depth_m=0.04", "time.end_s=2"], 1);
+    assert_eq!(
+        one.summary.checkpoints.last().unwrap().state_sha256,
+        result.summary.checkpoints.last().unwrap().state_sha256
+    );
+}
+
+/// With no slip at the walls' surface (`mps.wall_surface_no_slip`) the Bingham layer at 2 h_c
+/// moves at the nominal closed form U. Measured (mean over [1.5, 3] s): -3.0, -2.0 and -1.9 %
+/// at 10, 5 and 2.5 mm, where the walls' own velocity gives +20.1, +12.8 and +5.2 %.
+#[test]
+fn with_no_slip_at_the_wall_surface_the_plug_moves_at_the_nominal_closed_form_speed() {
+    let (result, _dir) = run(&["mps.wall_surface_no_slip=true"], 2);
+    let rows = plug_speeds_after(&result.path, 1.5);
+    let mean = rows.iter().sum::<f64>() / rows.len() as f64;
+    let closed = result.summary.metrics["closed_form_plug_speed_m_s"];
+    assert!(
+        (mean / closed - 1.0).abs() < 0.05,
+        "mean plug {mean} m/s, closed form {closed} m/s"
+    );
+}
+
+/// No slip at the walls' surface (`mps.wall_surface_no_slip`): a Newtonian layer (mu 50 Pa s,
+/// h 0.1 m) then runs at the half-Poiseuille speed of its nominal depth,
+/// U = rho g sin(theta) h^2 / (2 mu), where with the wall particles' own velocity it runs as
+/// one l0/2 deeper. Measured at 10 mm (mean over [1, 1.5] s): +0.6 % with the switch, +13.8 %
+/// without (+10.3 % is the closed form for h + l0/2); the bottom row then slips at about 2.5
+/// times its closed-form speed (5 mm).
+#[test]
+fn no_slip_at_the_wall_surface_gives_the_half_poiseuille_speed_of_the_nominal_depth() {
+    let text = std::fs::read_to_string(common::experiment("inclined_layer.yaml")).unwrap();
+    let (start, end) = (
+        text.find("\nfluid:").unwrap(),
+        text.find("\n# The dam break").unwrap(),
+    );
+    let newtonian =
+        "\nfluid:\n  model: newtonian\n  density_kg_m3: 2300.0\n  viscosity_pa_s: 50.0\n";
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("inclined_newtonian.yaml");
+    std::fs::write(
+        &path,
+        format!("{}{}{}", &text[..start], newtonian, &text[end..]),
+    )
+    .unwrap();
+    let mean_plug = |surface: bool| {
+        let sets: Vec<String> = [
+            "spacing_m=0.01",
+            "scene.period_m=0.12",
+            "time.end_s=1.5",
+            "mps.pressure_scheme=incremental",
+        ]
+        .iter()
+        .map(|s| s.to_string())
+        .chain([format!("mps.wall_surface_no_slip={surface}")])
+        .collect();
+        let resolved = mps_runner::experiment::load(&path, &sets).expect("manifest");
+        let out = tempfile::tempdir().unwrap();
+        let result = common::run_completed(&resolved, out.path(), 2);
+        let rows = plug_speeds_after(&result.path, 1.0);
+        assert!(rows.len() >= 40, "{} rows after 1 s", rows.len());
+        // The closed form of a Newtonian layer (h_c = 0) is the nominal half-Poiseuille speed.
+        let closed = result.summary.metrics["closed_form_plug_speed_m_s"];
+        (rows.iter().sum::<f64>() / rows.len() as f64, closed)
+    };
+    let (h, mu) = (0.1, 50.0);
+    let nominal = driving_pa_m() * h * h / (2.0 * mu);
+    let (surface, closed) = mean_plug(true);
+    assert!(
+        (closed / nominal - 1.0).abs() < 1e-12,
+        "{closed} vs {nominal}"
+    );
+    assert!(
+        (surface / nominal - 1.0).abs() < 0.02,
+        "plug {surface} m/s with no slip at the wall surface, half Poiseuille {nominal} m/s"
+    );
+    // The wall particles' own velocity: the layer shears as one l0/2 deeper, +10 % here.
+    let (own, _) = mean_plug(false);
+    assert!(
+        own / nominal - 1.0 > 0.08,
+        "plug {own} m/s without the switch"
+    );
+}
+
+#[test]
+fn a_3d_layer_or_a_short_period_is_refused_naming_the_field() {
+    for (sets, field) in [
+        (
+            vec!["dimension=3"],
+            "dimension: scene.kind inclined_layer is a 2D test",
+        ),
+        (
+            vec!["spacing_m=0.01", "scene.period_m=0.1"],
+            "scene.period_m: must be >= 3 (mps.laplacian_radius + 0.5) spacing_m",
+        ),
+        (
+            vec!["scene.incline_deg=90"],
+            "scene.incline_deg: must be in (0, 90)",
+        ),
+    ] {
+        let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
+        let error = mps_runner::experiment::load(&common::experiment("inclined_layer.yaml"), &sets)
+            .expect_err(field)
+            .to_string();
+        assert!(error.contains(field), "{sets:?}: {error}");
+    }
+}
