@@ -598,12 +598,13 @@ fn collapse_pressure_alternation(compressibility: &str) -> (f64, f64) {
 }
 
 /// The increment of the quiet 2D set has a mode that flips sign every step in a collapsing
-/// column at 5 mm: the whole column's pressure alternates by about its own mean (measured 2.5
-/// and 3.7 kPa around 2.2-2.5 kPa over [0.1, 0.3] s), the surface count with it, and the run
-/// blows up at 0.42 s, stopped by the speed guard at 0.71 s (docs/validation.md "The increment's two-step mode"). An artificial
-/// compressibility on the increment's diagonal, rho kappa / dt^2 (a sound speed of
-/// 1/sqrt(rho kappa) = 66 m/s at 1e-7 1/Pa), damps it: measured 2-4 % of the mean. At rest the
-/// increment is zero, so the term leaves a fluid at rest exactly where it was.
+/// column at 5 mm: the whole column's pressure alternates by about its own mean (measured 1.85
+/// kPa around 2.44 kPa over [0.1, 0.3] s), the surface count with it, and the run blows up at
+/// 0.42 s, stopped by the speed guard at 0.71 s (docs/validation.md "The increment's two-step
+/// mode"). An artificial compressibility on the increment's diagonal, rho kappa / dt^2 (a
+/// sound speed of 1/sqrt(rho kappa) = 66 m/s at 1e-7 1/Pa), damps it: measured 71 Pa around
+/// 2.36 kPa (3 %). At rest the increment is zero, so the term leaves a fluid at rest exactly
+/// where it was.
 #[test]
 fn an_artificial_compressibility_damps_the_increments_two_step_mode() {
     let (alternation, level) = collapse_pressure_alternation("1e-7");
