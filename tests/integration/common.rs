@@ -25,6 +25,12 @@ pub fn experiment(name: &str) -> PathBuf {
     root().join("experiments").join(name)
 }
 
+/// The solver at t = 0 of a resolved manifest's scene, for tests that step it in process.
+pub fn solver_of<const D: usize>(m: &experiment::Manifest) -> mps_runner::mps::Solver<D> {
+    let scene = experiment::build_scene::<D>(m);
+    mps_runner::mps::Solver::new(mps_runner::run::solver_config(m, &scene), scene.particles)
+}
+
 pub fn resolve(name: &str, sets: &[&str]) -> Resolved {
     let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
     experiment::load(&experiment(name), &sets).expect("manifest")

@@ -97,13 +97,8 @@ fn a_change_of_meaning_changes_the_state_hashes() {
 /// stage (collisions on the Verlet lists).
 fn state_after<const D: usize>(experiment: &str, sets: &[&str], end_s: f64, fresh: bool) -> String {
     use mps_runner::checkpoint::to_message;
-    use mps_runner::experiment::build_scene;
-    use mps_runner::mps::Solver;
-    use mps_runner::run::solver_config;
     let resolved = common::resolve(experiment, sets);
-    let m = &resolved.manifest;
-    let scene = build_scene::<D>(m);
-    let mut solver = Solver::new(solver_config(m, &scene), scene.particles);
+    let mut solver = common::solver_of::<D>(&resolved.manifest);
     solver.fresh_lists = fresh;
     while solver.time_s < end_s {
         let dt = solver.next_dt_s(end_s);

@@ -557,8 +557,6 @@ fn quadratic_strain_rate_is_exact_for_a_parabolic_profile_from_floor_to_surface(
 /// alternation) and the mean of P_k.
 fn collapse_pressure_alternation(compressibility: &str) -> (f64, f64) {
     use crate::common;
-    use mps_runner::experiment::build_scene;
-    use mps_runner::run::solver_config;
     let resolved = common::resolve(
         "column_collapse_2d.yaml",
         &[
@@ -572,14 +570,9 @@ fn collapse_pressure_alternation(compressibility: &str) -> (f64, f64) {
             &format!("mps.compressibility_1_pa={compressibility}"),
         ],
     );
-    let m = &resolved.manifest;
-    let scene = build_scene::<2>(m);
-    let mut solver = Solver::new(solver_config(m, &scene), scene.particles);
-    let end_s = 0.3;
+    let mut solver = common::solver_of::<2>(&resolved.manifest);
     let mut series = Vec::new();
-    while solver.time_s < end_s {
-        let dt = solver.next_dt_s(end_s);
-        solver.step(dt).unwrap();
+    while advance(&mut solver, 0.3) {
         let p = &solver.particles;
         let (sum, count) = (0..p.len())
             .filter(|&i| p.kind[i] == ParticleKind::Fluid)
