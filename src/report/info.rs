@@ -221,6 +221,16 @@ pub fn run_info(path: &Path, size_bytes: u64, run: &RunFile) -> RunInfo {
                     text.push_str(&format!(", mps.{key} {v}"));
                 }
             }
+            // Always in the canonical form; named when it is not the default, since under the
+            // incremental scheme it damps the increment's two-step mode (docs/validation.md).
+            let default = crate::manifest::Mps::default().compressibility_1_pa;
+            if let Some(v) = mps
+                .and_then(|mps| mps.get("compressibility_1_pa"))
+                .and_then(|v| v.as_f64())
+                .filter(|v| *v != default)
+            {
+                text.push_str(&format!(", mps.compressibility_1_pa {v:e}"));
+            }
             text
         }),
         build: run.metadata.get(META_BUILD).cloned().unwrap_or_default(),

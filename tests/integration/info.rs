@@ -59,6 +59,7 @@ fn info_of_a_finished_run_as_text_and_json() {
     );
     assert_eq!(line("outcome"), "outcome      completed");
     assert_eq!(line("stop rule"), "stop rule    none (ran to time.end_s)");
+    assert_eq!(line("scheme"), "scheme       mps.pressure_scheme standard");
     assert!(line("build").contains("release profile"), "{text}");
     assert_eq!(line("threads"), "threads      1");
     assert!(line("simulated").contains("t = 0.1 s, 100 steps"), "{text}");
@@ -141,6 +142,33 @@ fn info_of_a_finished_run_as_text_and_json() {
     assert_eq!(channels["/summary"].as_u64(), Some(1));
     assert_eq!(info["missing"].as_array().unwrap().len(), 0);
     assert!(info["damage"].is_null());
+}
+
+#[test]
+fn info_names_the_quiet_schemes_switches_and_a_compressibility_off_its_default() {
+    let dir = tempfile::tempdir().unwrap();
+    let sets = [
+        "time.end_s=0.005",
+        "mps.pressure_scheme=incremental",
+        "mps.pair_stabilisation=0.8",
+        "mps.corrected_strain_rate=true",
+        "mps.compressibility_1_pa=1e-7",
+    ];
+    let path = common::run_completed(&common::resolve("smoke_2d.yaml", &sets), dir.path(), 1).path;
+    let (code, text, _) = runner(&["info".as_ref(), path.as_os_str()]);
+    assert_eq!(code, Some(0), "{text}");
+    let scheme = text.lines().find(|l| l.starts_with("scheme ")).unwrap();
+    assert_eq!(
+        scheme,
+        "scheme       mps.pressure_scheme incremental, mps.pair_stabilisation 0.8, \
+         mps.corrected_strain_rate true, mps.compressibility_1_pa 1e-7"
+    );
+    let (_, json, _) = runner(&["info".as_ref(), "--json".as_ref(), path.as_os_str()]);
+    let info: Value = serde_json::from_str(&json).unwrap();
+    assert_eq!(
+        info["pressure_scheme"].as_str(),
+        scheme.strip_prefix("scheme       mps.pressure_scheme ")
+    );
 }
 
 #[test]
