@@ -356,10 +356,12 @@ fn bad_rodding_sections_are_refused_naming_the_field() {
 }
 
 /// The shipped rodding without its quiet scheme: the standard pressure scheme (the shipped
-/// stabilisers are read by the incremental scheme only).
+/// stabilisers are read by the incremental scheme only) with the PPE's default
+/// compressibility (the shipped 1e-7 would act on the whole pressure there).
 const STANDARD: &[&str] = &[
     "mps.pressure_scheme=standard",
     "mps.corrected_strain_rate=false",
+    "mps.compressibility_1_pa=4.5e-10",
 ];
 
 /// Seed 000's concrete (125 Pa) at rest in the form, the rod parked above the fill for the
