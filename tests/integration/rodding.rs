@@ -184,13 +184,13 @@ fn strokes_mix_the_layers_and_lose_nothing() {
     }
     // The mixing index at the end of each stroke (the first diagnostics row after it) rises,
     // from above 0.02 after the first (the form at rest under the shipped scheme stays at
-    // 0: 0.000 over 40 s at 5 mm, so it is the rod that mixes; 0.034 measured here).
+    // 0: 0.000 over 40 s at 5 mm, so it is the rod that mixes; 0.033 measured here).
     // And the shipped rod (its steel's slip length) comes out clean (issue "Rodding", item 2:
     // less than 2 % of the concrete above the fill after every withdrawal at the shipped
     // 5 mm, where 0.7-1.3 % is measured). What stays above the fill is single particles, on
     // the rod and on the form's walls just above the surface, so its share scales with the
-    // spacing: at 10 mm the bound is 4 % (1.3-2.0 % measured). A rod that drags a column up
-    // (no slip: 8.4-10.2 % here) fails.
+    // spacing: at 10 mm the bound is 4 % (1.3-2.7 % measured). A rod that drags a column up
+    // (no slip: 7.6-10.0 % here) fails.
     let mut after_strokes = Vec::new();
     for k in 1..=3 {
         let row = run
