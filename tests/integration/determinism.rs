@@ -100,10 +100,7 @@ fn state_after<const D: usize>(experiment: &str, sets: &[&str], end_s: f64, fres
     let resolved = common::resolve(experiment, sets);
     let mut solver = common::solver_of::<D>(&resolved.manifest);
     solver.fresh_lists = fresh;
-    while solver.time_s < end_s {
-        let dt = solver.next_dt_s(end_s);
-        solver.step(dt).unwrap();
-    }
+    while crate::core_setup::advance(&mut solver, end_s) {}
     to_message(0, &solver, 0.0).state_sha256
 }
 
