@@ -16,8 +16,9 @@ pub fn canonical_bits(x: f64) -> u64 {
 /// -0.0 as +0.0, particle-major), and every kind (u32). Then, only when the message's `tag`
 /// array is non-empty: the marker `tag` and every tag (u32); and only when `extra_scalars`
 /// is non-empty: the marker `extra_scalars`, their count (u64) and every value (f64 bits,
-/// -0.0 as +0.0). Both were added after the first files were written: a state without tags
-/// and without extra scalars hashes as it always did.
+/// -0.0 as +0.0); and only when `yield_stress_pa` is non-empty: the marker `yield_stress_pa`,
+/// its count (u64) and every value (f64 bits, -0.0 as +0.0). These were added after the first
+/// files were written: a state without them hashes as it always did.
 pub fn state_sha256(msg: &StateCheckpoint) -> String {
     let mut h = Sha256::new();
     h.update(b"mps.v1.state");
@@ -47,6 +48,13 @@ pub fn state_sha256(msg: &StateCheckpoint) -> String {
         h.update(b"extra_scalars");
         h.update((msg.extra_scalars.len() as u64).to_le_bytes());
         for v in &msg.extra_scalars {
+            h.update(canonical_bits(*v).to_le_bytes());
+        }
+    }
+    if !msg.yield_stress_pa.is_empty() {
+        h.update(b"yield_stress_pa");
+        h.update((msg.yield_stress_pa.len() as u64).to_le_bytes());
+        for v in &msg.yield_stress_pa {
             h.update(canonical_bits(*v).to_le_bytes());
         }
     }
@@ -81,6 +89,12 @@ pub fn to_message<const D: usize>(index: u32, solver: &Solver<D>, dt_s: f64) -> 
         } else {
             Vec::new()
         },
+        // Row-major per particle (nalgebra stores columns first).
+        yield_stress_pa: solver
+            .yield_stress_pa
+            .iter()
+            .flat_map(|s| s.transpose().iter().copied().collect::<Vec<f64>>())
+            .collect(),
     };
     msg.state_sha256 = state_sha256(&msg);
     msg
@@ -168,7 +182,20 @@ pub fn solver_from_message<const D: usize>(
         }
         emitted.push(v as u64);
     }
+    let n = particles.len();
+    let stress = &msg.yield_stress_pa;
+    if !stress.is_empty() && stress.len() != n * D * D {
+        return Err(format!(
+            "checkpoint {}: {} yield stress values for {n} particles in {D}D",
+            msg.index,
+            stress.len()
+        ));
+    }
     let mut solver = Solver::new(config, particles);
+    solver.yield_stress_pa = stress
+        .chunks_exact(D * D)
+        .map(crate::mps::yield_solve::Tensor::<D>::from_row_slice)
+        .collect();
     solver.time_s = msg.time_s;
     solver.step = msg.step;
     solver.inlet_emitted = emitted;

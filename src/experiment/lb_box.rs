@@ -238,7 +238,7 @@ impl Experiment for LbBox {
                 );
             }
         }
-        super::refuse_planes_with_exact_projection(m, c, "scene.half_domain", self.half_domain);
+        super::refuse_planes_without_images(m, c, "scene.half_domain", self.half_domain);
         if super::spacing_ok(m) {
             c.lattice_lengths(&dims, m.spacing_m);
             if self.half_domain {

@@ -98,7 +98,7 @@ impl Experiment for Slump {
             c.real("scene.cone_slip_length_m", b, NON_NEGATIVE);
         }
         c.real("scene.lift_start_s", self.lift_start_s, NON_NEGATIVE);
-        super::refuse_planes_with_exact_projection(m, c, "scene.quarter_domain", self.quarter_domain);
+        super::refuse_planes_without_images(m, c, "scene.quarter_domain", self.quarter_domain);
         c.real("scene.lift_height_m", self.lift_height_m, POSITIVE);
         if all_ok {
             let widest = self.cone_bottom_diameter_m.max(self.cone_top_diameter_m);

@@ -10,7 +10,8 @@
 //! `mps.compression_relaxation`, `mps.pair_stabilisation`, `mps.wall_support` and
 //! `mps.pressure_regularisation` (with `mps.regularisation_radius`), `mps.surface_depth` and
 //! `mps.particle_shifting` (with `mps.particle_shifting_limit`) at 0 (and under the standard
-//! scheme), `mps.pressure_floor_pa` at 0, `mps.corrected_strain_rate`,
+//! scheme), `mps.pressure_floor_pa` at 0, `mps.yield_penalty_pa_s` at 0 (with
+//! `mps.yield_max_iterations` and `mps.yield_tolerance_1_s`), `mps.corrected_strain_rate`,
 //! `mps.wall_surface_no_slip`, `mps.quadratic_strain_rate` and `mps.exact_projection` (also
 //! under the standard scheme) false, `stop.rest_*` without `stop.rest_metric`, null
 //! `mps.wall_collision_*`, `time.dt_min_s`, `stop.max_ghost_particles` and the rod's, the
@@ -87,6 +88,16 @@ pub fn canonical_text<S: SceneSection>(manifest: &Manifest<S>) -> String {
         }
         if !mps.contains_key("particle_shifting") {
             mps.remove("particle_shifting_limit");
+        }
+        // The regularised law (penalty 0) is the behaviour before the yield solve existed.
+        if manifest.mps.yield_penalty_pa_s == 0.0 {
+            for key in [
+                "yield_penalty_pa_s",
+                "yield_max_iterations",
+                "yield_tolerance_1_s",
+            ] {
+                mps.remove(key);
+            }
         }
         // The switches: off (false) is the behaviour before they existed; the exact projection
         // is read by the incremental scheme only.

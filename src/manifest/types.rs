@@ -284,6 +284,21 @@ pub struct Mps {
     /// Supporting walls (`wall_support`) are unknowns of it too. Unused by `standard`.
     #[serde(default)]
     pub exact_projection: bool,
+    /// Penalty r of Bingham's law with a rigid state, in Pa s: the viscous stage minimises
+    /// the step's dissipation by an augmented Lagrangian (`src/mps/yield_solve.rs`), so that
+    /// material whose stress stays below the yield stress has exactly zero strain rate,
+    /// instead of the regularised law's non-flowing viscosity. 0 = off (the regularised law;
+    /// `fluid.critical_strain_rate_1_s` or the rigid viscosity then only say which particles
+    /// count as flowing). A Bingham or bi-viscosity fluid without `stress_gradient_term`.
+    #[serde(default)]
+    pub yield_penalty_pa_s: f64,
+    /// Most augmented-Lagrangian iterations per step (each one a CG solve).
+    #[serde(default = "default_yield_max_iterations")]
+    pub yield_max_iterations: u32,
+    /// The iterations stop when the law's strain rate and the velocity's agree, and the law's
+    /// changed over the last iteration, within this equivalent shear rate everywhere, in 1/s.
+    #[serde(default = "default_yield_tolerance_1_s")]
+    pub yield_tolerance_1_s: f64,
     /// Artificial compressibility on the PPE diagonal, in 1/Pa.
     #[serde(default = "default_compressibility_1_pa")]
     pub compressibility_1_pa: f64,
@@ -372,6 +387,9 @@ impl Default for Mps {
             exact_projection: false,
             ppe_preconditioner: PpePreconditioner::default(),
             multigrid_over_correction: default_multigrid_over_correction(),
+            yield_penalty_pa_s: 0.0,
+            yield_max_iterations: default_yield_max_iterations(),
+            yield_tolerance_1_s: default_yield_tolerance_1_s(),
             compressibility_1_pa: default_compressibility_1_pa(),
             collision_distance: default_collision_distance(),
             collision_restitution: default_collision_restitution(),
@@ -429,6 +447,14 @@ impl PressureSchemeName {
 
 fn default_regularisation_radius() -> f64 {
     1.5
+}
+
+fn default_yield_max_iterations() -> u32 {
+    50
+}
+
+fn default_yield_tolerance_1_s() -> f64 {
+    1e-3
 }
 
 fn default_particle_shifting_limit() -> f64 {

@@ -231,6 +231,62 @@ pub fn check<S: SceneSection>(m: &Manifest<S>) -> Vec<Issue> {
             ),
         );
     }
+    if c.real(
+        "mps.yield_penalty_pa_s",
+        p.yield_penalty_pa_s,
+        between(0.0, true, 1e12, true),
+    ) && p.yield_penalty_pa_s > 0.0
+    {
+        c.real("mps.yield_tolerance_1_s", p.yield_tolerance_1_s, POSITIVE);
+        if c.int_at_least("mps.yield_max_iterations", p.yield_max_iterations.into(), 1)
+            && p.yield_max_iterations > 10_000
+        {
+            c.fail(
+                "mps.yield_max_iterations",
+                format!("must be <= 10000, got {}", p.yield_max_iterations),
+            );
+        }
+        let (plastic, stress_gradient_term) = match m.fluid {
+            Fluid::Newtonian { .. } => (None, false),
+            Fluid::Bingham {
+                plastic_viscosity_pa_s,
+                stress_gradient_term,
+                ..
+            }
+            | Fluid::BiViscosity {
+                plastic_viscosity_pa_s,
+                stress_gradient_term,
+                ..
+            } => (Some(plastic_viscosity_pa_s), stress_gradient_term),
+        };
+        match plastic {
+            None => c.fail(
+                "mps.yield_penalty_pa_s",
+                "needs a yield-stress fluid (fluid.model bingham or bi_viscosity)".to_string(),
+            ),
+            Some(mu) if mu <= 0.0 => c.fail(
+                "mps.yield_penalty_pa_s",
+                "needs fluid.plastic_viscosity_pa_s > 0".to_string(),
+            ),
+            _ => {}
+        }
+        if stress_gradient_term {
+            c.fail(
+                "fluid.stress_gradient_term",
+                "must be false with mps.yield_penalty_pa_s > 0 (the yield solve's stress is already a divergence)"
+                    .to_string(),
+            );
+        }
+        // Measured: without it the Bingham Poiseuille plug is 6 % fast, the yield term and
+        // the Laplacian putting no-slip at different places (tests/integration/bingham.rs).
+        if !p.wall_surface_no_slip {
+            c.fail(
+                "mps.wall_surface_no_slip",
+                "must be true with mps.yield_penalty_pa_s > 0 (the yield term and the viscous term then hold no-slip at the same surface)"
+                    .to_string(),
+            );
+        }
+    }
     if p.quadratic_strain_rate && p.corrected_strain_rate {
         c.fail(
             "mps.quadratic_strain_rate",

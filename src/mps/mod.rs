@@ -12,6 +12,7 @@ pub mod rheology;
 pub mod solver;
 pub mod sparse;
 pub mod viscosity;
+pub mod yield_solve;
 
 pub use body::{Path, RigidBody, Segment};
 pub use inlet::Inlet;

@@ -18,7 +18,8 @@ use super::pressure::SolveReport;
 use super::reduce::PARTICLES_PER_TASK;
 use super::reduce::max_by;
 use super::rheology::Rheology;
-use super::viscosity::{SlipWall, StrainRateGradient, ViscousSettings, predict_velocity};
+use super::viscosity::{Loads, SlipWall, StrainRateGradient, ViscousSettings, predict_velocity};
+use super::yield_solve::{Tensor, YieldSolve};
 use rayon::prelude::*;
 use std::time::Instant;
 
@@ -39,6 +40,8 @@ pub struct SolverConfig<const D: usize> {
     pub stress_gradient_term: bool,
     pub viscosity_tolerance: f64,
     pub viscosity_max_iterations: u32,
+    /// Bingham's law with a rigid state (`yield_solve.rs`); `None`: the regularised law.
+    pub yield_solve: Option<YieldSolve>,
     /// Magnitude of gravity, acting along the last axis towards -inf.
     pub gravity_m_s2: f64,
     /// Gravity turned by this angle from -vertical towards +x (an inclined plane as a level
@@ -272,6 +275,8 @@ pub struct Solver<const D: usize> {
     /// Strain-rate invariant Pi of every particle at the start of the last step (empty before
     /// the first step). Derived data for output, not part of the state.
     pub strain_invariant: Vec<f64>,
+    /// With the yield solve, each particle's yield stress multiplier from the last step (Pa).
+    pub yield_stress_pa: Vec<Tensor<D>>,
     neighbours: Neighbours,
     /// Pairs of `neighbours` within the kernel radii at the current positions.
     pairs: KernelPairs,
@@ -324,6 +329,7 @@ impl<const D: usize> Solver<D> {
             time_s: 0.0,
             step: 0,
             strain_invariant: Vec::new(),
+            yield_stress_pa: Vec::new(),
             neighbours: Neighbours::default(),
             pairs: KernelPairs::default(),
             paired_at_m: Vec::new(),
@@ -393,6 +399,7 @@ impl<const D: usize> Solver<D> {
             max_iterations: c.viscosity_max_iterations,
             gradient: c.strain_rate_gradient,
             wall_surface_m: c.wall_surface_no_slip.then_some(0.5 * c.spacing_m),
+            yield_solve: c.yield_solve,
             slip_walls: c
                 .bodies
                 .iter()
@@ -442,8 +449,11 @@ impl<const D: usize> Solver<D> {
             &self.pairs,
             &self.refs,
             &self.viscous_settings(),
-            self.gravity(),
-            pressure_accel.as_deref(),
+            Loads {
+                body_force_m_s2: self.gravity(),
+                pressure_accel_m_s2: pressure_accel.as_deref(),
+                yield_stress_pa: &self.yield_stress_pa,
+            },
             dt_s,
         );
         self.timing.viscosity_s += viscosity_started.elapsed().as_secs_f64();
@@ -463,6 +473,7 @@ impl<const D: usize> Solver<D> {
         }
         let non_flowing_fraction = self.non_flowing_fraction(&stage.strain_invariant);
         self.strain_invariant = stage.strain_invariant;
+        self.yield_stress_pa = stage.yield_stress_pa;
         // (6) r* = r + dt u*.
         {
             let p = &mut self.particles;

@@ -8,6 +8,7 @@ use super::pressure::{Preconditioner, SolveReport, solve_pcg_many};
 use super::reduce::PARTICLES_PER_TASK;
 use super::rheology::Rheology;
 use super::sparse::CsrMatrix;
+use super::yield_solve::{StrainOperator, Tensor, YieldSolve};
 use nalgebra::SMatrix;
 use rayon::prelude::*;
 
@@ -28,6 +29,10 @@ pub struct ViscousSettings {
     pub wall_surface_m: Option<f64>,
     /// Rigid bodies whose walls have Navier slip (empty: every wall as above).
     pub slip_walls: Vec<SlipWall>,
+    /// Bingham's law with a rigid state, by the augmented Lagrangian of
+    /// [`super::yield_solve`], instead of the regularised viscosity (`None`). Read for a
+    /// Bingham fluid without the divergence form only.
+    pub yield_solve: Option<YieldSolve>,
 }
 
 /// A rigid body's walls with Navier slip, u_s = b du_t/dn at the body's surface (steel in fresh
@@ -57,13 +62,13 @@ fn slip_wall_of(slip_walls: &[SlipWall], j: usize) -> Option<&SlipWall> {
 /// The walls a fluid particle's pair terms see: the no-slip frame (`wall_surface_m`) of the
 /// walls that do not slip, and the frame of the slip walls.
 #[derive(Debug, Clone, Copy)]
-struct Frames<const D: usize> {
+pub(crate) struct Frames<const D: usize> {
     no_slip: Option<WallFrame<D>>,
     slip: Option<WallFrame<D>>,
 }
 
 impl<const D: usize> Frames<D> {
-    fn of(
+    pub(crate) fn of(
         p: &Particles<D>,
         nb: &Neighbours,
         i: usize,
@@ -84,7 +89,7 @@ impl<const D: usize> Frames<D> {
     /// The factor of wall or dummy neighbour j's pair term (u_j - u_i) at displacement r_ij
     /// (1 for a wall that carries its own velocity).
     #[inline]
-    fn factor(&self, slip_walls: &[SlipWall], j: usize, r_ij: &Vector<D>) -> f64 {
+    pub(crate) fn factor(&self, slip_walls: &[SlipWall], j: usize, r_ij: &Vector<D>) -> f64 {
         if let Some(wall) = slip_wall_of(slip_walls, j)
             && let Some(f) = &self.slip
         {
@@ -184,6 +189,9 @@ pub struct ViscousStage<const D: usize> {
     pub strain_invariant: Vec<f64>,
     /// Worst CG report over the velocity components (iterations summed).
     pub solve: SolveReport,
+    /// With the yield solve, the yield part of each particle's stress (its multiplier, in Pa;
+    /// zero for non-fluid), carried to the next step; empty without it.
+    pub yield_stress_pa: Vec<Tensor<D>>,
 }
 
 /// Velocity gradient G_ab = d u_a / d x_b at fluid particle i by the gradient model (eq. 3,
@@ -360,10 +368,33 @@ pub fn strain_invariant<const D: usize>(g: &SMatrix<f64, D, D>) -> f64 {
     2.0 * e.component_mul(&e).sum()
 }
 
+/// What the viscous stage takes from outside the particles: the body force, and what the
+/// step carries from the last one.
+#[derive(Debug, Clone, Copy)]
+pub struct Loads<'a, const D: usize> {
+    pub body_force_m_s2: Vector<D>,
+    /// The incremental scheme's -grad(p^n)/rho per particle (`None` under the standard one).
+    pub pressure_accel_m_s2: Option<&'a [Vector<D>]>,
+    /// The yield solve's multiplier per particle from the last step (empty: none yet).
+    pub yield_stress_pa: &'a [Tensor<D>],
+}
+
+impl<const D: usize> Loads<'_, D> {
+    /// A body force alone.
+    pub fn body_force(body_force_m_s2: Vector<D>) -> Self {
+        Loads {
+            body_force_m_s2,
+            pressure_accel_m_s2: None,
+            yield_stress_pa: &[],
+        }
+    }
+}
+
 /// Implicit viscous predictor: u* solves u* - dt V(u*) = u^n + dt f, with f the body force
 /// plus, for the incremental pressure scheme, the acceleration -grad(p^n)/rho of the pressure
-/// carried from the last step (`pressure_accel_m_s2`, per particle). The viscosity is
-/// taken from the strain rate of u^n. Two forms of the viscous term V:
+/// carried from the last step (`loads.pressure_accel_m_s2`, per particle). The viscosity is
+/// taken from the strain rate of u^n (with the yield solve: see [`super::yield_solve`]). Two
+/// forms of the viscous term V:
 /// - without the eq. 8 term: nu_i <lap u>_i (seed 000 eq. 8 without its fourth term). Each
 ///   row is divided by dt nu_i, which makes the matrix symmetric positive definite:
 ///   (1/(dt nu_i) + sum_j a_ij) u_i - sum_j a_ij u_j = rhs_i / (dt nu_i);
@@ -380,19 +411,38 @@ pub fn predict_velocity<const D: usize>(
     pairs: &KernelPairs,
     refs: &RefValues,
     settings: &ViscousSettings,
-    body_force_m_s2: Vector<D>,
-    pressure_accel_m_s2: Option<&[Vector<D>]>,
+    loads: Loads<D>,
     dt_s: f64,
 ) -> ViscousStage<D> {
+    let Loads {
+        body_force_m_s2,
+        pressure_accel_m_s2,
+        yield_stress_pa: carried_stress_pa,
+    } = loads;
     let rho = settings.density_kg_m3;
     let n = p.len();
     let is_fluid = |i: usize| p.kind[i] == ParticleKind::Fluid;
+    let divergence_form = settings.stress_gradient_term;
+    // The yield solve: (mu_p, tau_y, settings); the plastic viscosity alone in the matrix.
+    let yield_solve = match (settings.yield_solve, settings.rheology) {
+        (
+            Some(solve),
+            Rheology::Bingham {
+                plastic_viscosity_pa_s,
+                yield_stress_pa,
+                ..
+            },
+        ) if !divergence_form && plastic_viscosity_pa_s > 0.0 => {
+            Some((plastic_viscosity_pa_s, yield_stress_pa, solve))
+        }
+        _ => None,
+    };
     let strain: Vec<f64> = (0..n)
         .into_par_iter()
         .with_min_len(PARTICLES_PER_TASK)
         .with_max_len(PARTICLES_PER_TASK)
         .map(|i| {
-            if is_fluid(i) {
+            if is_fluid(i) && yield_solve.is_none() {
                 strain_invariant(&velocity_gradient(
                     p,
                     &pairs.near,
@@ -411,7 +461,10 @@ pub fn predict_velocity<const D: usize>(
     let mu: Vec<f64> = strain
         .par_iter()
         .with_min_len(PARTICLES_PER_TASK)
-        .map(|&s| rheology.viscosity_pa_s(s))
+        .map(|&s| match yield_solve {
+            Some((plastic, _, _)) => plastic,
+            None => rheology.viscosity_pa_s(s),
+        })
         .collect();
     let rhs: Vec<Vector<D>> = (0..n)
         .into_par_iter()
@@ -428,7 +481,6 @@ pub fn predict_velocity<const D: usize>(
             }
         })
         .collect();
-    let divergence_form = settings.stress_gradient_term;
     let rows: Vec<usize> = (0..n)
         .filter(|&i| is_fluid(i) && (divergence_form || mu[i] > 0.0))
         .collect();
@@ -443,6 +495,7 @@ pub fn predict_velocity<const D: usize>(
             velocity_m_s: velocity,
             strain_invariant: strain,
             solve,
+            yield_stress_pa: Vec::new(),
         };
     }
     let mut row_of = vec![u32::MAX; n];
@@ -532,6 +585,52 @@ pub fn predict_velocity<const D: usize>(
             std::array::from_fn(|m| if m < D { extra[k].2[m] } else { 0.0 })
         })
     };
+    if let Some((plastic, yield_stress_pa, yield_settings)) = yield_solve {
+        let op = StrainOperator::build(
+            p,
+            &pairs.near,
+            refs,
+            &rows,
+            &row_of,
+            settings.wall_surface_m,
+            &settings.slip_walls,
+        );
+        let carried = rows
+            .iter()
+            .map(|&i| {
+                carried_stress_pa
+                    .get(i)
+                    .copied()
+                    .unwrap_or_else(Tensor::zeros)
+            })
+            .collect();
+        let outcome = super::yield_solve::solve(
+            &op,
+            &matrix,
+            &b,
+            &mut x,
+            carried,
+            plastic,
+            yield_stress_pa,
+            &yield_settings,
+            settings.tolerance,
+            settings.max_iterations,
+        );
+        let mut strain = vec![0.0; n];
+        let mut stress = vec![Tensor::<D>::zeros(); n];
+        for (k, &i) in rows.iter().enumerate() {
+            velocity[i] = Vector::<D>::from(x[k]);
+            // Pi = 2 gamma : gamma, the law's strain rate (0 where rigid).
+            strain[i] = 2.0 * outcome.strain_rate[k].norm_squared();
+            stress[i] = outcome.stress_pa[k];
+        }
+        return ViscousStage {
+            velocity_m_s: velocity,
+            strain_invariant: strain,
+            solve: outcome.solve,
+            yield_stress_pa: stress,
+        };
+    }
     let reports = solve_pcg_many(
         &matrix,
         &b,
@@ -557,6 +656,7 @@ pub fn predict_velocity<const D: usize>(
         velocity_m_s: velocity,
         strain_invariant: strain,
         solve,
+        yield_stress_pa: Vec::new(),
     }
 }
 

@@ -216,6 +216,9 @@ pub fn run_info(path: &Path, size_bytes: u64, run: &RunFile) -> RunInfo {
                 "wall_surface_no_slip",
                 "quadratic_strain_rate",
                 "exact_projection",
+                "yield_penalty_pa_s",
+                "yield_max_iterations",
+                "yield_tolerance_1_s",
             ] {
                 if let Some(v) = mps.and_then(|mps| mps.get(key)) {
                     text.push_str(&format!(", mps.{key} {v}"));

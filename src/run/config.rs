@@ -2,6 +2,7 @@
 use crate::experiment::{Manifest, Scene};
 use crate::manifest::{Fluid, PpePreconditioner, PpeSource, PressureSchemeName};
 use crate::mps::viscosity::StrainRateGradient;
+use crate::mps::yield_solve::YieldSolve;
 use crate::mps::{PressureScheme, Rheology, SolverConfig, SourceTerm};
 
 /// The rheology a manifest's fluid section describes, and whether eq. 8's term is on.
@@ -50,6 +51,11 @@ pub fn solver_config<const D: usize>(m: &Manifest, scene: &Scene<D>) -> SolverCo
         stress_gradient_term,
         viscosity_tolerance: m.mps.viscosity_tolerance,
         viscosity_max_iterations: m.mps.viscosity_max_iterations,
+        yield_solve: (m.mps.yield_penalty_pa_s > 0.0).then_some(YieldSolve {
+            penalty_pa_s: m.mps.yield_penalty_pa_s,
+            max_iterations: m.mps.yield_max_iterations,
+            tolerance_1_s: m.mps.yield_tolerance_1_s,
+        }),
         gravity_m_s2: m.gravity_m_s2,
         gravity_tilt_rad: scene.gravity_tilt_rad,
         periodic_x: scene.periodic_x,

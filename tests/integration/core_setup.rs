@@ -43,6 +43,7 @@ pub fn config<const D: usize>(
             viscosity_pa_s: 0.05,
         },
         stress_gradient_term: false,
+        yield_solve: None,
         viscosity_tolerance: 1e-9,
         viscosity_max_iterations: 2000,
         gravity_m_s2: 9.81,

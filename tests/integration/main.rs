@@ -44,3 +44,4 @@ mod tags;
 mod tank_at_rest;
 mod trend;
 mod verify;
+mod yield_solve;

@@ -58,6 +58,7 @@ fn state(index: u32, salt: f64) -> StateCheckpoint {
         state_sha256: format!("{index:064x}"),
         extra_scalars: vec![],
         tag: vec![],
+        yield_stress_pa: vec![],
     }
 }
 

@@ -7,7 +7,7 @@
 use mps_runner::mps::grid::{KernelPairs, Neighbours};
 use mps_runner::mps::kernel::RefValues;
 use mps_runner::mps::viscosity::{
-    SlipWall, StrainRateGradient, ViscousSettings, predict_velocity, strain_invariant,
+    Loads, SlipWall, StrainRateGradient, ViscousSettings, predict_velocity, strain_invariant,
     velocity_gradient,
 };
 use mps_runner::mps::{ParticleKind, Particles, Rheology, Vector};
@@ -83,9 +83,17 @@ fn steady(slip_length_m: Option<f64>) -> Vec<(f64, f64, f64)> {
             })
             .into_iter()
             .collect(),
+        yield_solve: None,
     };
     for step in 0..2_000 {
-        let stage = predict_velocity(&p, &pairs, &refs, &settings, Vector::zeros(), None, 10.0);
+        let stage = predict_velocity(
+            &p,
+            &pairs,
+            &refs,
+            &settings,
+            Loads::body_force(Vector::zeros()),
+            10.0,
+        );
         assert!(stage.solve.converged, "{:?}", stage.solve);
         let change = fluid
             .iter()

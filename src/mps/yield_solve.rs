@@ -1,0 +1,379 @@
+//! Bingham's law with a true rigid state in the viscous stage: the implicit step solved as a
+//! minimisation by an augmented Lagrangian (ALG2: Fortin & Glowinski 1983, Glowinski & Le
+//! Tallec 1989; for Bingham flow Saramito & Roquet 2001).
+//!
+//! The backward-Euler viscous step of a Bingham fluid minimises
+//! sum_i [ rho/(2 dt) |u_i - u~_i|^2 + (plastic part) + sqrt(2) tau_y |e_i(u)| ], with
+//! e_i(u) = sym(G_i(u)) the strain rate of [`super::viscosity::velocity_gradient`]'s
+//! corrected model (|e| the Frobenius norm, sqrt(2)|e| = sqrt(Pi), the equivalent shear
+//! rate). The yield term is not differentiable at e = 0: that is the rigid state, which the
+//! regularised law (seed 000 eqs. 6-7) replaces by a viscosity tau_y / sqrt(Pi_c). Here a
+//! strain-rate field gamma_i stands in for e_i(u) with a multiplier lambda_i (the yield part
+//! of the deviatoric stress, |lambda_i| <= sqrt(2) tau_y) and a penalty r, and three steps
+//! repeat until e(u) = gamma:
+//! 1. u: (rho/dt + plastic) u + r E^T E u = rho/dt u~ - E^T (lambda + r (e0 - gamma)), with E
+//!    the linear part of e (e = E u + e0, e0 from the walls' known velocities) and E^T its
+//!    transpose, the discrete divergence that is E's adjoint (equal particle volumes);
+//! 2. gamma_i: theta = lambda_i + r e_i(u); gamma_i = 0 if |theta| <= sqrt(2) tau_y (rigid),
+//!    else (|theta| - sqrt(2) tau_y) theta / (r |theta|);
+//! 3. lambda_i += r (e_i(u) - gamma_i).
+//!
+//! A particle is rigid when the stress that holds it is below the yield stress, not when its
+//! one-step strain rate is small; gamma = 0 there exactly. The multiplier is carried from step
+//! to step (it changes little), which is what makes a few iterations per step enough.
+use super::grid::{Neighbours, entry_index};
+use super::kernel::{RefValues, weight};
+use super::operators::{MIN_DET_RATIO, gradient_correction};
+use super::particles::{ParticleKind, Particles, Vector};
+use super::pressure::SolveReport;
+use super::reduce::{MIN_PARALLEL_LEN, map_particles, max_by, sum_by};
+use super::sparse::CsrMatrix;
+use super::viscosity::{Frames, SlipWall};
+use nalgebra::SMatrix;
+use rayon::prelude::*;
+
+/// A D x D tensor (strain rate, stress).
+pub type Tensor<const D: usize> = SMatrix<f64, D, D>;
+
+/// Settings of the augmented-Lagrangian yield solve.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct YieldSolve {
+    /// The penalty r, in Pa s.
+    pub penalty_pa_s: f64,
+    /// Most iterations (u, gamma, lambda) per step.
+    pub max_iterations: u32,
+    /// Converged when the equivalent shear rate of e(u) - gamma and of gamma's change over an
+    /// iteration are both below this everywhere, in 1/s.
+    pub tolerance_1_s: f64,
+}
+
+/// The strain rate as a linear map of the unknown velocities (the viscous stage's rows):
+/// e_k = sym(sum over entries (c, a) of u_c a^T) + e0_k.
+pub(crate) struct StrainOperator<const D: usize> {
+    offsets: Vec<usize>,
+    columns: Vec<u32>,
+    coefficients: Vec<Vector<D>>,
+    constant: Vec<Tensor<D>>,
+    // The transpose: per unknown, its (row, coefficient) entries in row order.
+    t_offsets: Vec<usize>,
+    t_rows: Vec<u32>,
+    t_coefficients: Vec<Vector<D>>,
+}
+
+impl<const D: usize> StrainOperator<D> {
+    /// The corrected strain rate of each row's particle (`rows[k]`, `row_of` its inverse) over
+    /// the number-density neighbours: G_i = sum_j (u_j - u_i) b_ij^T, b_ij = M_i^-1 r_ij
+    /// w_ij / r_ij^2; a wall or dummy neighbour carries its own velocity times the frame's
+    /// factor (as in `velocity_gradient`), which goes to e0.
+    pub(crate) fn build(
+        p: &Particles<D>,
+        nb: &Neighbours,
+        refs: &RefValues,
+        rows: &[usize],
+        row_of: &[u32],
+        wall_surface_m: Option<f64>,
+        slip_walls: &[SlipWall],
+    ) -> Self {
+        type Row<const D: usize> = (Vec<(u32, Vector<D>)>, Tensor<D>);
+        let per_row: Vec<Row<D>> = map_particles(rows.len(), |k| {
+            let i = rows[k];
+            let frames = Frames::of(p, nb, i, refs.radius_n_m, wall_surface_m, slip_walls);
+            let mut m = Tensor::<D>::zeros();
+            for &e in nb.of(i) {
+                let r = nb.displacement(&p.position_m, i, e);
+                let r2 = r.norm_squared();
+                let w = weight(r2.sqrt(), refs.radius_n_m);
+                if w > 0.0 {
+                    m += r * r.transpose() * (w / r2);
+                }
+            }
+            let c = gradient_correction(&m, refs.n0, MIN_DET_RATIO);
+            let mut entries = Vec::new();
+            let mut own = Vector::<D>::zeros();
+            let mut constant = Tensor::<D>::zeros();
+            for &e in nb.of(i) {
+                let j = entry_index(e);
+                let r = nb.displacement(&p.position_m, i, e);
+                let r2 = r.norm_squared();
+                let w = weight(r2.sqrt(), refs.radius_n_m);
+                if w == 0.0 {
+                    continue;
+                }
+                // M_i is symmetric: b^T = r^T M^-1 w / r^2.
+                let b = c.transpose() * r * (w / r2);
+                if p.kind[j] == ParticleKind::Fluid && row_of[j] != u32::MAX {
+                    entries.push((row_of[j], b));
+                    own -= b;
+                } else {
+                    let f = frames.factor(slip_walls, j, &r);
+                    constant += p.velocity_m_s[j] * (b * f).transpose();
+                    own -= b * f;
+                }
+            }
+            entries.push((k as u32, own));
+            (entries, (constant + constant.transpose()) * 0.5)
+        });
+        let mut op = Self {
+            offsets: Vec::with_capacity(rows.len() + 1),
+            columns: Vec::new(),
+            coefficients: Vec::new(),
+            constant: Vec::with_capacity(rows.len()),
+            t_offsets: vec![0; rows.len() + 1],
+            t_rows: Vec::new(),
+            t_coefficients: Vec::new(),
+        };
+        op.offsets.push(0);
+        for (entries, constant) in per_row {
+            for (c, a) in entries {
+                op.columns.push(c);
+                op.coefficients.push(a);
+                op.t_offsets[c as usize + 1] += 1;
+            }
+            op.offsets.push(op.columns.len());
+            op.constant.push(constant);
+        }
+        for k in 0..rows.len() {
+            op.t_offsets[k + 1] += op.t_offsets[k];
+        }
+        let mut fill = op.t_offsets.clone();
+        op.t_rows = vec![0; op.columns.len()];
+        op.t_coefficients = vec![Vector::<D>::zeros(); op.columns.len()];
+        for k in 0..rows.len() {
+            for e in op.offsets[k]..op.offsets[k + 1] {
+                let c = op.columns[e] as usize;
+                op.t_rows[fill[c]] = k as u32;
+                op.t_coefficients[fill[c]] = op.coefficients[e];
+                fill[c] += 1;
+            }
+        }
+        op
+    }
+
+    fn rows(&self) -> usize {
+        self.constant.len()
+    }
+
+    /// E u (without e0).
+    fn apply(&self, u: &[[f64; D]]) -> Vec<Tensor<D>> {
+        map_particles(self.rows(), |k| {
+            let mut g = Tensor::<D>::zeros();
+            for e in self.offsets[k]..self.offsets[k + 1] {
+                let x = Vector::<D>::from(u[self.columns[e] as usize]);
+                g += x * self.coefficients[e].transpose();
+            }
+            (g + g.transpose()) * 0.5
+        })
+    }
+
+    /// E^T s for a field s of symmetric tensors (s : sym(u a^T) = u . s a).
+    fn apply_transpose(&self, s: &[Tensor<D>]) -> Vec<[f64; D]> {
+        map_particles(self.rows(), |c| {
+            let mut v = Vector::<D>::zeros();
+            for e in self.t_offsets[c]..self.t_offsets[c + 1] {
+                v += s[self.t_rows[e] as usize] * self.t_coefficients[e];
+            }
+            v.into()
+        })
+    }
+
+    /// The diagonal of E^T E per unknown and component: |sym(e_a c^T)|^2 = (|c|^2 + c_a^2)/2
+    /// summed over the unknown's entries.
+    fn normal_diagonal(&self) -> Vec<[f64; D]> {
+        map_particles(self.rows(), |c| {
+            let mut d = [0.0; D];
+            for e in self.t_offsets[c]..self.t_offsets[c + 1] {
+                let a = &self.t_coefficients[e];
+                let a2 = a.norm_squared();
+                for (m, d) in d.iter_mut().enumerate() {
+                    *d += 0.5 * (a2 + a[m] * a[m]);
+                }
+            }
+            d
+        })
+    }
+}
+
+/// The outcome of [`solve`].
+pub(crate) struct YieldOutcome<const D: usize> {
+    /// gamma per row: the strain rate of the law (0 where rigid).
+    pub strain_rate: Vec<Tensor<D>>,
+    /// lambda per row, in Pa.
+    pub stress_pa: Vec<Tensor<D>>,
+    /// CG iterations summed over the u steps, the largest relative residual, and whether the
+    /// iterations met their tolerance.
+    pub solve: SolveReport,
+}
+
+/// The augmented-Lagrangian iterations of the module's header. `matrix` and `b` are the
+/// viscous stage's plastic system as assembled by `predict_velocity`, rows divided by
+/// dt mu_p / rho (so mu_p matrix is rho/dt + mu_p L); `x` holds the start guess and returns
+/// the velocity; `carried` is lambda per row from the last step.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn solve<const D: usize>(
+    op: &StrainOperator<D>,
+    matrix: &CsrMatrix,
+    b: &[[f64; D]],
+    x: &mut [[f64; D]],
+    carried: Vec<Tensor<D>>,
+    plastic_viscosity_pa_s: f64,
+    yield_stress_pa: f64,
+    settings: &YieldSolve,
+    cg_tolerance: f64,
+    cg_max_iterations: u32,
+) -> YieldOutcome<D> {
+    let n = op.rows();
+    let mu = plastic_viscosity_pa_s;
+    let r = settings.penalty_pa_s;
+    let limit = std::f64::consts::SQRT_2 * yield_stress_pa;
+    let shrink = |theta: &Tensor<D>| {
+        let size = theta.norm();
+        if size <= limit {
+            Tensor::<D>::zeros()
+        } else {
+            theta * ((size - limit) / (r * size))
+        }
+    };
+    let inv_diag: Vec<[f64; D]> = {
+        let normal = op.normal_diagonal();
+        map_particles(n, |k| {
+            std::array::from_fn(|m| 1.0 / (mu * matrix.diagonal_of(k, m) + r * normal[k][m]))
+        })
+    };
+    let mut lambda = carried;
+    let mut e = op.apply(x);
+    let mut gamma: Vec<Tensor<D>> =
+        map_particles(n, |k| shrink(&(lambda[k] + (e[k] + op.constant[k]) * r)));
+    let mut report = SolveReport {
+        iterations: 0,
+        relative_residual: 0.0,
+        converged: false,
+    };
+    let mut cg_converged = true;
+    for _ in 0..settings.max_iterations {
+        let load: Vec<Tensor<D>> =
+            map_particles(n, |k| lambda[k] + (op.constant[k] - gamma[k]) * r);
+        let div = op.apply_transpose(&load);
+        let rhs: Vec<[f64; D]> =
+            map_particles(n, |k| std::array::from_fn(|m| mu * b[k][m] - div[k][m]));
+        let apply = |u: &[[f64; D]], y: &mut [[f64; D]]| {
+            matrix.multiply(u, y);
+            let eu = op.apply(u);
+            let back = op.apply_transpose(&eu);
+            y.par_iter_mut()
+                .with_min_len(MIN_PARALLEL_LEN)
+                .zip(&back)
+                .for_each(|(y, t)| {
+                    for m in 0..D {
+                        y[m] = mu * y[m] + r * t[m];
+                    }
+                });
+        };
+        let cg = conjugate_gradient(apply, &inv_diag, &rhs, x, cg_tolerance, cg_max_iterations);
+        report.iterations += cg.iterations;
+        if cg.relative_residual.is_nan() || cg.relative_residual > report.relative_residual {
+            report.relative_residual = cg.relative_residual;
+        }
+        cg_converged &= cg.converged;
+        e = op.apply(x);
+        let next: Vec<(Tensor<D>, Tensor<D>)> = map_particles(n, |k| {
+            let theta = lambda[k] + (e[k] + op.constant[k]) * r;
+            let g = shrink(&theta);
+            (g, theta - g * r)
+        });
+        let change = max_by(n, |k| (next[k].0 - gamma[k]).norm());
+        gamma = next.iter().map(|v| v.0).collect();
+        lambda = next.into_iter().map(|v| v.1).collect();
+        let mismatch = max_by(n, |k| (e[k] + op.constant[k] - gamma[k]).norm());
+        let tolerance = settings.tolerance_1_s / std::f64::consts::SQRT_2;
+        if mismatch <= tolerance && change <= tolerance {
+            break;
+        }
+    }
+    // Not reaching the yield tolerance in max_iterations is not an error: the multiplier
+    // carries on into the next step. A u step that failed its tolerance is.
+    report.converged = cg_converged;
+    YieldOutcome {
+        strain_rate: gamma,
+        stress_pa: lambda,
+        solve: report,
+    }
+}
+
+/// Jacobi-preconditioned CG for a matrix given as a product, over vectors of D components
+/// per row (the components are coupled). Order-fixed reductions (docs/design.md section 6).
+fn conjugate_gradient<const D: usize>(
+    apply: impl Fn(&[[f64; D]], &mut [[f64; D]]),
+    inv_diag: &[[f64; D]],
+    b: &[[f64; D]],
+    x: &mut [[f64; D]],
+    tolerance: f64,
+    max_iterations: u32,
+) -> SolveReport {
+    let n = b.len();
+    let dot = |u: &[[f64; D]], v: &[[f64; D]]| {
+        sum_by(n, |k| (0..D).map(|m| u[k][m] * v[k][m]).sum::<f64>())
+    };
+    let b_norm = dot(b, b).sqrt();
+    if n == 0 || b_norm == 0.0 {
+        x.iter_mut().for_each(|v| *v = [0.0; D]);
+        return SolveReport {
+            iterations: 0,
+            relative_residual: 0.0,
+            converged: true,
+        };
+    }
+    let mut r = vec![[0.0; D]; n];
+    apply(x, &mut r);
+    for (r, b) in r.iter_mut().zip(b) {
+        for m in 0..D {
+            r[m] = b[m] - r[m];
+        }
+    }
+    let precondition = |r: &[[f64; D]]| -> Vec<[f64; D]> {
+        map_particles(n, |k| std::array::from_fn(|m| r[k][m] * inv_diag[k][m]))
+    };
+    let mut z = precondition(&r);
+    let mut p = z.clone();
+    let mut ap = vec![[0.0; D]; n];
+    let mut rz = dot(&r, &z);
+    let mut r_norm = dot(&r, &r).sqrt();
+    let mut iterations = 0;
+    while r_norm > tolerance * b_norm && iterations < max_iterations {
+        apply(&p, &mut ap);
+        let p_ap = dot(&p, &ap);
+        if p_ap.is_nan() || p_ap <= 0.0 {
+            break;
+        }
+        let alpha = rz / p_ap;
+        x.par_iter_mut()
+            .with_min_len(MIN_PARALLEL_LEN)
+            .zip(r.par_iter_mut())
+            .zip(p.par_iter().zip(&ap))
+            .for_each(|((x, r), (p, ap))| {
+                for m in 0..D {
+                    x[m] += alpha * p[m];
+                    r[m] -= alpha * ap[m];
+                }
+            });
+        z = precondition(&r);
+        let rz_new = dot(&r, &z);
+        let beta = rz_new / rz;
+        rz = rz_new;
+        p.par_iter_mut()
+            .with_min_len(MIN_PARALLEL_LEN)
+            .zip(&z)
+            .for_each(|(p, z)| {
+                for m in 0..D {
+                    p[m] = z[m] + beta * p[m];
+                }
+            });
+        r_norm = dot(&r, &r).sqrt();
+        iterations += 1;
+    }
+    let relative_residual = r_norm / b_norm;
+    SolveReport {
+        iterations,
+        relative_residual,
+        converged: relative_residual <= tolerance,
+    }
+}
