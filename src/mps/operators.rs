@@ -155,15 +155,27 @@ pub fn moment_matrix<const D: usize>(
     radius_m: f64,
 ) -> nalgebra::SMatrix<f64, D, D> {
     let mut m = nalgebra::SMatrix::<f64, D, D>::zeros();
-    for &e in nb.of(i) {
+    for (_, r, r2, w) in weighted_neighbours(positions, nb, i, radius_m) {
+        m += r * r.transpose() * (w / r2);
+    }
+    m
+}
+
+/// i's neighbours within `radius_m` that have a weight: (entry, r_ij, |r_ij|^2, w(|r_ij|)), in
+/// list order.
+#[inline]
+pub fn weighted_neighbours<'a, const D: usize>(
+    positions: &'a [Vector<D>],
+    nb: &'a Neighbours,
+    i: usize,
+    radius_m: f64,
+) -> impl Iterator<Item = (u32, Vector<D>, f64, f64)> + 'a {
+    nb.of(i).iter().filter_map(move |&e| {
         let r = nb.displacement(positions, i, e);
         let r2 = r.norm_squared();
         let w = weight(r2.sqrt(), radius_m);
-        if w > 0.0 {
-            m += r * r.transpose() * (w / r2);
-        }
-    }
-    m
+        (w > 0.0).then_some((e, r, r2, w))
+    })
 }
 
 /// The share of the full lattice's det M below which the corrective matrix is not used (a

@@ -2,7 +2,7 @@
 //! term of seed 000 eq. 8, and the implicit viscous predictor solved by CG.
 use super::grid::{KernelPairs, Neighbours, entry_index};
 use super::kernel::{RefValues, weight};
-use super::operators::{MIN_DET_RATIO, gradient_correction};
+use super::operators::{MIN_DET_RATIO, gradient_correction, weighted_neighbours};
 use super::particles::{ParticleKind, Particles, Vector};
 use super::pressure::{Preconditioner, SolveReport, solve_pcg_many};
 use super::reduce::PARTICLES_PER_TASK;
@@ -223,14 +223,8 @@ pub fn velocity_gradient<const D: usize>(
     let ui = p.velocity_m_s[i];
     let mut g = SMatrix::<f64, D, D>::zeros();
     let mut m = SMatrix::<f64, D, D>::zeros();
-    for &e in nb.of(i) {
+    for (e, r, r2, w) in weighted_neighbours(&p.position_m, nb, i, refs.radius_n_m) {
         let j = entry_index(e);
-        let r = nb.displacement(&p.position_m, i, e);
-        let r2 = r.norm_squared();
-        let w = weight(r2.sqrt(), refs.radius_n_m);
-        if w == 0.0 {
-            continue;
-        }
         let du = if p.kind[j] == ParticleKind::Fluid {
             nb.reflect(e, p.velocity_m_s[j]) - ui
         } else {

@@ -22,8 +22,8 @@
 //! one-step strain rate is small; gamma = 0 there exactly. The multiplier is carried from step
 //! to step (it changes little), which is what makes a few iterations per step enough.
 use super::grid::{Neighbours, entry_index};
-use super::kernel::{RefValues, weight};
-use super::operators::{MIN_DET_RATIO, gradient_correction};
+use super::kernel::RefValues;
+use super::operators::{MIN_DET_RATIO, gradient_correction, moment_matrix, weighted_neighbours};
 use super::particles::{ParticleKind, Particles, Vector};
 use super::pressure::SolveReport;
 use super::reduce::{MIN_PARALLEL_LEN, map_particles, max_by, sum_by};
@@ -78,27 +78,13 @@ impl<const D: usize> StrainOperator<D> {
         let per_row: Vec<Row<D>> = map_particles(rows.len(), |k| {
             let i = rows[k];
             let frames = Frames::of(p, nb, i, refs.radius_n_m, wall_surface_m, slip_walls);
-            let mut m = Tensor::<D>::zeros();
-            for &e in nb.of(i) {
-                let r = nb.displacement(&p.position_m, i, e);
-                let r2 = r.norm_squared();
-                let w = weight(r2.sqrt(), refs.radius_n_m);
-                if w > 0.0 {
-                    m += r * r.transpose() * (w / r2);
-                }
-            }
+            let m = moment_matrix(&p.position_m, nb, i, refs.radius_n_m);
             let c = gradient_correction(&m, refs.n0, MIN_DET_RATIO);
             let mut entries = Vec::new();
             let mut own = Vector::<D>::zeros();
             let mut constant = Tensor::<D>::zeros();
-            for &e in nb.of(i) {
+            for (e, r, r2, w) in weighted_neighbours(&p.position_m, nb, i, refs.radius_n_m) {
                 let j = entry_index(e);
-                let r = nb.displacement(&p.position_m, i, e);
-                let r2 = r.norm_squared();
-                let w = weight(r2.sqrt(), refs.radius_n_m);
-                if w == 0.0 {
-                    continue;
-                }
                 // M_i is symmetric: b^T = r^T M^-1 w / r^2.
                 let b = c.transpose() * r * (w / r2);
                 if p.kind[j] == ParticleKind::Fluid && row_of[j] != u32::MAX {

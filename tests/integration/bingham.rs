@@ -97,6 +97,14 @@ fn exact(y: f64, h: f64, g: f64, tau: f64, eta: f64) -> f64 {
     g / (2.0 * eta) * (h * h - y * y) - tau / eta * (h - y)
 }
 
+/// The largest distance of the profile (y, u) from the closed form, in m/s.
+fn worst_error(y: &[f64], u: &[f64], h: f64, g: f64, tau: f64, eta: f64) -> f64 {
+    y.iter()
+        .zip(u)
+        .map(|(y, u)| (u - exact(*y, h, g, tau, eta)).abs())
+        .fold(0.0, f64::max)
+}
+
 /// MPS walls of particles at rest give no-slip a little beyond the nominal wall. The
 /// Newtonian profile of the same discretisation locates it: the centre velocity G h_eff^2 /
 /// (2 eta) gives h_eff. Returns (h_eff, spacing).
@@ -214,12 +222,7 @@ fn bingham_poiseuille_plug_matches_closed_form() {
             (measured - plug_half_width).abs() <= l0 + 1e-12,
             "{name}: plug half-width {measured}"
         );
-        let worst = y
-            .iter()
-            .zip(&u)
-            .map(|(y, u)| (u - exact(*y, h, g, tau, eta)).abs())
-            .fold(0.0, f64::max)
-            / plug_velocity;
+        let worst = worst_error(&y, &u, h, g, tau, eta) / plug_velocity;
         eprintln!("{name}: worst profile error {worst:.4} of the plug velocity");
         assert!(worst < tolerance, "{name}: profile error {worst}");
     }
@@ -267,12 +270,7 @@ fn yield_solve_gives_a_rigid_plug_and_the_closed_form() {
     assert!((sheared - plug_half_width).abs() <= 0.5 * l0 + 1e-12);
     let u_max = u.iter().cloned().fold(0.0, f64::max);
     let error = (u_max - plug_velocity).abs() / plug_velocity;
-    let worst = y
-        .iter()
-        .zip(&u)
-        .map(|(y, u)| (u - exact(*y, h, g, tau, eta)).abs())
-        .fold(0.0, f64::max)
-        / plug_velocity;
+    let worst = worst_error(&y, &u, h, g, tau, eta) / plug_velocity;
     eprintln!(
         "plug velocity {u_max:.5} vs {plug_velocity:.5} (error {error:.5}); worst {worst:.5}"
     );

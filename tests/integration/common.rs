@@ -137,3 +137,15 @@ pub fn smoke_sweep_folder(dir: &Path) -> PathBuf {
     assert_eq!(code, Some(0), "{err}");
     PathBuf::from(stdout.lines().last().unwrap())
 }
+
+/// The quiet 2D set of `--set`s (docs/validation.md, "Holding still"): the incremental scheme
+/// with its stabilisers, the pressure regularisation, the surface depth and the corrected
+/// strain rate; the compressibility that damps the increment's two-step mode is not in it.
+pub const QUIET_2D: [&str; 6] = [
+    "mps.pressure_scheme=incremental",
+    "mps.pair_stabilisation=0.8",
+    "mps.wall_support=0.95",
+    "mps.pressure_regularisation=1",
+    "mps.surface_depth=0.5",
+    "mps.corrected_strain_rate=true",
+];

@@ -557,19 +557,13 @@ fn quadratic_strain_rate_is_exact_for_a_parabolic_profile_from_floor_to_surface(
 /// alternation) and the mean of P_k.
 fn collapse_pressure_alternation(compressibility: &str) -> (f64, f64) {
     use crate::common;
-    let resolved = common::resolve(
-        "column_collapse_2d.yaml",
-        &[
-            "spacing_m=0.005",
-            "mps.pressure_scheme=incremental",
-            "mps.pair_stabilisation=0.8",
-            "mps.wall_support=0.95",
-            "mps.pressure_regularisation=1",
-            "mps.surface_depth=0.5",
-            "mps.corrected_strain_rate=true",
-            &format!("mps.compressibility_1_pa={compressibility}"),
-        ],
-    );
+    let compressibility = format!("mps.compressibility_1_pa={compressibility}");
+    let sets = [
+        &["spacing_m=0.005", compressibility.as_str()],
+        &common::QUIET_2D[..],
+    ]
+    .concat();
+    let resolved = common::resolve("column_collapse_2d.yaml", &sets);
     let mut solver = common::solver_of::<2>(&resolved.manifest);
     let mut series = Vec::new();
     while advance(&mut solver, 0.3) {
