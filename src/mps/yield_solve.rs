@@ -20,7 +20,8 @@
 //!
 //! A particle is rigid when the stress that holds it is below the yield stress, not when its
 //! one-step strain rate is small; gamma = 0 there exactly. The multiplier is carried from step
-//! to step (it changes little), which is what makes a few iterations per step enough.
+//! to step (it changes little): a still tank then needs one iteration per step, a settling
+//! heap 20-50 (docs/validation.md, "A rigid state by an augmented Lagrangian").
 use super::grid::{Neighbours, entry_index};
 use super::kernel::RefValues;
 use super::operators::{MIN_DET_RATIO, gradient_correction, moment_matrix, weighted_neighbours};
