@@ -230,12 +230,13 @@ pub(crate) fn solve<const D: usize>(
     let mut e = op.apply(x);
     let mut gamma: Vec<Tensor<D>> =
         map_particles(n, |k| shrink(&(lambda[k] + (e[k] + op.constant[k]) * r)));
+    // Not reaching the yield tolerance in max_iterations is not an error: the multiplier
+    // carries on into the next step. A u step that failed its tolerance is.
     let mut report = SolveReport {
         iterations: 0,
         relative_residual: 0.0,
-        converged: false,
+        converged: true,
     };
-    let mut cg_converged = true;
     for _ in 0..settings.max_iterations {
         let load: Vec<Tensor<D>> =
             map_particles(n, |k| lambda[k] + (op.constant[k] - gamma[k]) * r);
@@ -260,7 +261,7 @@ pub(crate) fn solve<const D: usize>(
         if cg.relative_residual.is_nan() || cg.relative_residual > report.relative_residual {
             report.relative_residual = cg.relative_residual;
         }
-        cg_converged &= cg.converged;
+        report.converged &= cg.converged;
         e = op.apply(x);
         let next: Vec<(Tensor<D>, Tensor<D>)> = map_particles(n, |k| {
             let theta = lambda[k] + (e[k] + op.constant[k]) * r;
@@ -276,9 +277,6 @@ pub(crate) fn solve<const D: usize>(
             break;
         }
     }
-    // Not reaching the yield tolerance in max_iterations is not an error: the multiplier
-    // carries on into the next step. A u step that failed its tolerance is.
-    report.converged = cg_converged;
     YieldOutcome {
         strain_rate: gamma,
         stress_pa: lambda,
