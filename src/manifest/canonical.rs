@@ -14,7 +14,7 @@
 //! `mps.yield_max_iterations` and `mps.yield_tolerance_1_s`), `mps.corrected_strain_rate`,
 //! `mps.wall_surface_no_slip`, `mps.quadratic_strain_rate` and `mps.exact_projection` (also
 //! under the standard scheme) false, `stop.rest_*` without `stop.rest_metric`, null
-//! `mps.wall_collision_*`, `time.dt_min_s`, `stop.max_ghost_particles` and the rod's, the
+//! `mps.wall_collision_*`, `mps.strain_rate_radius`, `time.dt_min_s`, `stop.max_ghost_particles` and the rod's, the
 //! cone's and the bodies' slip lengths, an empty `boundaries` section), so every experiment
 //! keeps the hash it had before they existed and files written then still verify. JSON is
 //! YAML, so the canonical text loads back through [`super::from_str`] to the same manifest
@@ -119,6 +119,7 @@ pub fn canonical_text<S: SceneSection>(manifest: &Manifest<S>) -> String {
     for (section, key) in [
         ("mps", "wall_collision_distance"),
         ("mps", "wall_collision_second_pass"),
+        ("mps", "strain_rate_radius"),
         ("mps", "solid_wall_layers"),
         ("time", "dt_min_s"),
         ("stop", "max_ghost_particles"),

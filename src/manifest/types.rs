@@ -278,6 +278,13 @@ pub struct Mps {
     /// `corrected_strain_rate`.
     #[serde(default)]
     pub quadratic_strain_rate: bool,
+    /// Radius of the strain rate's velocity gradient, in units of spacing (null: the
+    /// number-density radius). A layer a few particles thick moving as a plug over a sheared
+    /// bottom row reads shear in every row whose stencil reaches the wall; a stencil of the
+    /// first shell (1.5) keeps the shear where it is. In (1, max(number_density_radius,
+    /// laplacian_radius)].
+    #[serde(default)]
+    pub strain_rate_radius: Option<f64>,
     /// Incremental scheme: the increment's equation built from the very divergence and
     /// gradient that measure and correct the velocity (-D G, an exact projection: the
     /// corrected velocity has the divergence asked for), instead of the MPS Laplacian model.
@@ -384,6 +391,7 @@ impl Default for Mps {
             corrected_strain_rate: false,
             wall_surface_no_slip: false,
             quadratic_strain_rate: false,
+            strain_rate_radius: None,
             exact_projection: false,
             ppe_preconditioner: PpePreconditioner::default(),
             multigrid_over_correction: default_multigrid_over_correction(),

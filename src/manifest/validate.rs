@@ -155,6 +155,21 @@ pub fn check<S: SceneSection>(m: &Manifest<S>) -> Vec<Issue> {
             ),
         );
     }
+    // The neighbour lists reach the Laplacian's radius (>= the number density's).
+    if let Some(r) = p.strain_rate_radius
+        && c.real("mps.strain_rate_radius", r, between(1.0, false, 5.0, true))
+        && lap_ok
+        && r > p.laplacian_radius
+    {
+        c.fail(
+            "mps.strain_rate_radius",
+            format!(
+                "must be <= mps.laplacian_radius ({}), got {}",
+                fmt_num(p.laplacian_radius),
+                fmt_num(r)
+            ),
+        );
+    }
     c.real(
         "mps.surface_threshold",
         p.surface_threshold,

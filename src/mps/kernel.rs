@@ -23,6 +23,11 @@ pub struct RefValues {
     pub n0_lap: f64,
     /// lambda = sum w r^2 / sum w with `radius_lap_m` (m^2).
     pub lambda_m2: f64,
+    /// Effective radius of the strain rate's velocity gradient (m); `radius_n_m` unless set
+    /// by [`RefValues::with_strain_radius`].
+    pub radius_strain_m: f64,
+    /// n0 with `radius_strain_m`.
+    pub n0_strain: f64,
 }
 
 impl RefValues {
@@ -58,6 +63,22 @@ impl RefValues {
             n0,
             n0_lap,
             lambda_m2: wr2 / n0_lap,
+            radius_strain_m: radius_n_m,
+            n0_strain: n0,
+        }
+    }
+
+    /// The same values with the strain rate's gradient over `radius_strain_m` (its n0 from
+    /// the same lattice sum).
+    pub fn with_strain_radius<const D: usize>(self, spacing_m: f64, radius_strain_m: f64) -> Self {
+        if radius_strain_m == self.radius_n_m {
+            return self;
+        }
+        let lattice = Self::on_lattice::<D>(spacing_m, radius_strain_m, self.radius_lap_m);
+        Self {
+            radius_strain_m,
+            n0_strain: lattice.n0,
+            ..self
         }
     }
 }

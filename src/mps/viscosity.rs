@@ -213,7 +213,7 @@ pub fn velocity_gradient<const D: usize>(
     wall_surface_m: Option<f64>,
     slip_walls: &[SlipWall],
 ) -> SMatrix<f64, D, D> {
-    let frames = Frames::of(p, nb, i, refs.radius_n_m, wall_surface_m, slip_walls);
+    let frames = Frames::of(p, nb, i, refs.radius_strain_m, wall_surface_m, slip_walls);
     if model == StrainRateGradient::Quadratic
         && let Some(g) = quadratic_gradient(p, nb, refs, i, &frames, slip_walls)
     {
@@ -223,7 +223,7 @@ pub fn velocity_gradient<const D: usize>(
     let ui = p.velocity_m_s[i];
     let mut g = SMatrix::<f64, D, D>::zeros();
     let mut m = SMatrix::<f64, D, D>::zeros();
-    for (e, r, r2, w) in weighted_neighbours(&p.position_m, nb, i, refs.radius_n_m) {
+    for (e, r, r2, w) in weighted_neighbours(&p.position_m, nb, i, refs.radius_strain_m) {
         let j = entry_index(e);
         let du = if p.kind[j] == ParticleKind::Fluid {
             nb.reflect(e, p.velocity_m_s[j]) - ui
@@ -236,9 +236,9 @@ pub fn velocity_gradient<const D: usize>(
         }
     }
     if corrected {
-        g * gradient_correction(&m, refs.n0, MIN_DET_RATIO)
+        g * gradient_correction(&m, refs.n0_strain, MIN_DET_RATIO)
     } else {
-        g * (D as f64 / refs.n0)
+        g * (D as f64 / refs.n0_strain)
     }
 }
 
@@ -247,7 +247,7 @@ pub fn velocity_gradient<const D: usize>(
 const FIT: usize = 9;
 
 /// The weighted least-squares fit u_j - u_i = G r_ij + (1/2) r_ij^T H r_ij over i's
-/// neighbours (weights w(r_ij), lengths in units of the number-density radius for
+/// neighbours (weights w(r_ij), lengths in units of the strain rate's radius for
 /// conditioning), the gradient G of least-squares MPS to second order (Tamai & Koshizuka
 /// 2014). Wall and dummy neighbours take part with their own velocity, unless `frame` is given:
 /// then they are replaced by one point on the walls' surface carrying the nearest wall's
@@ -263,7 +263,7 @@ fn quadratic_gradient<const D: usize>(
     slip_walls: &[SlipWall],
 ) -> Option<SMatrix<f64, D, D>> {
     let frame = frames.no_slip.as_ref();
-    let scale = refs.radius_n_m;
+    let scale = refs.radius_strain_m;
     let unknowns = D + D * (D + 1) / 2;
     let ui = p.velocity_m_s[i];
     let mut normal = SMatrix::<f64, FIT, FIT>::zeros();
@@ -299,7 +299,7 @@ fn quadratic_gradient<const D: usize>(
         let j = entry_index(e);
         let r = nb.displacement(&p.position_m, i, e);
         let d = r.norm();
-        let w = weight(d, refs.radius_n_m);
+        let w = weight(d, refs.radius_strain_m);
         if w == 0.0 {
             continue;
         }

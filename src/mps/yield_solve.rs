@@ -63,7 +63,7 @@ pub(crate) struct StrainOperator<const D: usize> {
 
 impl<const D: usize> StrainOperator<D> {
     /// The corrected strain rate of each row's particle (`rows[k]`, `row_of` its inverse) over
-    /// the number-density neighbours: G_i = sum_j (u_j - u_i) b_ij^T, b_ij = M_i^-1 r_ij
+    /// the neighbours within the strain rate's radius: G_i = sum_j (u_j - u_i) b_ij^T, b_ij = M_i^-1 r_ij
     /// w_ij / r_ij^2; a wall or dummy neighbour carries its own velocity times the frame's
     /// factor (as in `velocity_gradient`), which goes to e0.
     pub(crate) fn build(
@@ -78,13 +78,14 @@ impl<const D: usize> StrainOperator<D> {
         type Row<const D: usize> = (Vec<(u32, Vector<D>)>, Tensor<D>);
         let per_row: Vec<Row<D>> = map_particles(rows.len(), |k| {
             let i = rows[k];
-            let frames = Frames::of(p, nb, i, refs.radius_n_m, wall_surface_m, slip_walls);
-            let m = moment_matrix(&p.position_m, nb, i, refs.radius_n_m);
-            let c = gradient_correction(&m, refs.n0, MIN_DET_RATIO);
+            let radius = refs.radius_strain_m;
+            let frames = Frames::of(p, nb, i, radius, wall_surface_m, slip_walls);
+            let m = moment_matrix(&p.position_m, nb, i, radius);
+            let c = gradient_correction(&m, refs.n0_strain, MIN_DET_RATIO);
             let mut entries = Vec::new();
             let mut own = Vector::<D>::zeros();
             let mut constant = Tensor::<D>::zeros();
-            for (e, r, r2, w) in weighted_neighbours(&p.position_m, nb, i, refs.radius_n_m) {
+            for (e, r, r2, w) in weighted_neighbours(&p.position_m, nb, i, radius) {
                 let j = entry_index(e);
                 // M_i is symmetric: b^T = r^T M^-1 w / r^2.
                 let b = c.transpose() * r * (w / r2);

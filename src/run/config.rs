@@ -62,6 +62,11 @@ pub fn solver_config<const D: usize>(m: &Manifest, scene: &Scene<D>) -> SolverCo
         symmetry: scene.symmetry,
         radius_n_m: m.mps.number_density_radius * l0,
         radius_lap_m: m.mps.laplacian_radius * l0,
+        radius_strain_m: m
+            .mps
+            .strain_rate_radius
+            .unwrap_or(m.mps.number_density_radius)
+            * l0,
         surface_threshold: m.mps.surface_threshold,
         relaxation_coefficient: m.mps.relaxation_coefficient,
         multigrid_ppe: m.mps.ppe_preconditioner == PpePreconditioner::Multigrid,

@@ -839,6 +839,25 @@ fn invalid_values_are_named_and_located() {
         ],
     );
     assert_invalid(&e, "mps.quadratic_strain_rate", None, &["set one of them"]);
+    // The strain rate's radius: beyond the nearest neighbours, within the neighbour lists;
+    // unset, it is no part of the experiment.
+    let e = err_with(MINIMAL, &["mps.strain_rate_radius=1"]);
+    assert_invalid(&e, "mps.strain_rate_radius", None, &["(1, 5]", "1"]);
+    let e = err_with(MINIMAL, &["mps.strain_rate_radius=3.5"]);
+    assert_invalid(
+        &e,
+        "mps.strain_rate_radius",
+        None,
+        &["mps.laplacian_radius (3.1)", "3.5"],
+    );
+    let shell = ok_with(MINIMAL, &["mps.strain_rate_radius=1.5"]);
+    assert_ne!(ok_with(MINIMAL, &[]).hash_hex, shell.hash_hex);
+    assert!(shell.canonical.contains(r#""strain_rate_radius":1.5"#));
+    assert!(
+        !ok_with(MINIMAL, &[])
+            .canonical
+            .contains("strain_rate_radius")
+    );
 
     // from an override: no line, says so
     let e = err_with(MINIMAL, &["time.courant=1.5"]);

@@ -551,6 +551,70 @@ fn quadratic_strain_rate_is_exact_for_a_parabolic_profile_from_floor_to_surface(
     );
 }
 
+/// A layer two rows thick moving as a plug at U over a no-slip floor (`mps.wall_surface_no_slip`;
+/// all the shear lies between the floor's surface and the bottom row). The strain rate summed
+/// over the layer, sum of du/dy l0, is the velocity jump that the rows share: U for the
+/// discrete plug, whose yield dissipation is then tau_y U per unit of floor, that of a plug
+/// sliding at the yield stress. Over the first shell (`mps.strain_rate_radius` 1.5) the top
+/// row reads no shear and the bottom row U / l0 (the mean over its cell), so the sum is U
+/// exactly. Over the number-density radius (2.1) the top row's stencil reaches the wall row
+/// and reads shear where there is none: the layer dissipates more than the plug can, and a
+/// thin yield-stress layer stops short (docs/validation.md, "A strain-rate stencil of the
+/// first shell").
+#[test]
+fn a_first_shell_strain_rate_reads_a_thin_plug_as_rigid() {
+    use mps_runner::mps::kernel::RefValues;
+    use mps_runner::mps::viscosity::{StrainRateGradient, velocity_gradient};
+    let l0 = 0.01;
+    let plug_m_s = 0.05;
+    let columns = 14;
+    let mut p = floor_lattice(l0, columns, 2);
+    for i in 0..p.len() {
+        if p.kind[i] == ParticleKind::Fluid {
+            p.velocity_m_s[i] = Vector::<2>::new(plug_m_s, 0.0);
+        }
+    }
+    let wide = RefValues::on_lattice::<2>(l0, 2.1 * l0, 3.1 * l0);
+    let shell = wide.with_strain_radius::<2>(l0, 1.5 * l0);
+    let nb = Neighbours::build(&p.position_m, wide.radius_n_m);
+    let shear = |refs: &RefValues, row: f64| -> f64 {
+        let i = (0..p.len())
+            .find(|&i| {
+                let x = p.position_m[i];
+                p.kind[i] == ParticleKind::Fluid
+                    && (x[0] - 7.0 * l0).abs() < 1e-12
+                    && (x[1] - (row + 0.5) * l0).abs() < 1e-12
+            })
+            .expect("the particle is on the lattice");
+        let g = velocity_gradient(
+            &p,
+            &nb,
+            refs,
+            i,
+            StrainRateGradient::Corrected,
+            Some(0.5 * l0),
+            &[],
+        );
+        // A plug along x: only du/dy can be read.
+        assert!(g[(0, 0)].abs() < 1e-9 && g[(1, 0)].abs() < 1e-9 && g[(1, 1)].abs() < 1e-9);
+        g[(0, 1)]
+    };
+    let (top, bottom) = (shear(&shell, 1.0), shear(&shell, 0.0));
+    assert!(top.abs() < 1e-9 * plug_m_s / l0, "top row du/dy {top}");
+    assert!(
+        (bottom * l0 - plug_m_s).abs() < 1e-9 * plug_m_s,
+        "bottom row du/dy {bottom}, expected {}",
+        plug_m_s / l0
+    );
+    let (top_wide, bottom_wide) = (shear(&wide, 1.0), shear(&wide, 0.0));
+    let jump_wide = (top_wide.abs() + bottom_wide.abs()) * l0 / plug_m_s;
+    eprintln!("over 2.1 l0: du/dy {bottom_wide:.3} and {top_wide:.3} 1/s, sum {jump_wide:.3} U");
+    assert!(
+        jump_wide > 1.02,
+        "the rows' shear sums to {jump_wide} U over 2.1 l0"
+    );
+}
+
 /// The mean fluid pressure of `column_collapse_2d.yaml` at 5 mm under the full quiet 2D set
 /// with `compressibility` (mps.compressibility_1_pa), stepped in process to 0.3 s: over the
 /// steps in [0.1, 0.3] s, the mean of |P_k - (P_(k-1) + P_(k+1))/2| (the step-to-step
