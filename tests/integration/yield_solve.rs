@@ -60,6 +60,39 @@ fn a_heap_under_the_yield_solve_comes_to_rest_and_replays_bit_for_bit() {
     common::assert_replays(&result.path, Some(after_flow));
 }
 
+/// The same heap with the strain rate over the first shell (`mps.strain_rate_radius` 1.5):
+/// the heap's thin tip is no longer read as sheared above its bottom row, and the heap comes
+/// to rest within a spacing of the full-Bingham 1.00 m (docs/validation.md, "A strain-rate
+/// stencil of the first shell"; measured 1.013 m, stopped at 4.13 s), where the number-density
+/// stencil stops it at 0.975 m.
+#[test]
+fn a_first_shell_strain_rate_brings_the_heap_to_the_full_bingham_length() {
+    let dir = tempfile::tempdir().unwrap();
+    let sets = [
+        &SETS[..],
+        &common::QUIET_2D[..],
+        &["mps.strain_rate_radius=1.5"],
+    ]
+    .concat();
+    let resolved = common::resolve("column_collapse_2d.yaml", &sets);
+    let result = common::run_completed(&resolved, &dir.path().join("shell"), 2);
+    let run = read_run(&result.path).unwrap();
+    let summary = run.summary.as_ref().unwrap();
+    let front_m = summary.metrics["front_position_m"];
+    let stop_s = summary.metrics["stop_time_s"];
+    eprintln!(
+        "stopped at {stop_s:.3} s ({}), front {front_m:.4} m",
+        summary.stop
+    );
+    assert!(!summary.stop.is_empty(), "not stopped by the rest rule");
+    // One spacing (0.02 m) either side of the full-Bingham 1.00 m at its finest cells, up to
+    // its coarsest cells' 1.04 m.
+    assert!(
+        (0.98..=1.04).contains(&front_m),
+        "front {front_m} m against the full-Bingham 1.00 m"
+    );
+}
+
 /// The yield solve's fields are refused where they cannot work, naming the field.
 #[test]
 fn the_yield_solve_is_refused_without_its_conditions() {
