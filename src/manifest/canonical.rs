@@ -14,11 +14,11 @@
 //! `mps.yield_max_iterations` and `mps.yield_tolerance_1_s`), `mps.corrected_strain_rate`,
 //! `mps.wall_surface_no_slip`, `mps.quadratic_strain_rate` and `mps.exact_projection` (also
 //! under the standard scheme) false, `stop.rest_*` without `stop.rest_metric`, null
-//! `mps.wall_collision_*`, `mps.strain_rate_radius`, `time.dt_min_s`, `stop.max_ghost_particles` and the rod's, the
-//! cone's and the bodies' slip lengths, an empty `boundaries` section), so every experiment
-//! keeps the hash it had before they existed and files written then still verify. JSON is
-//! YAML, so the canonical text loads back through [`super::from_str`] to the same manifest
-//! and hash.
+//! `mps.wall_collision_*`, `mps.strain_rate_radius`, `time.dt_min_s`,
+//! `stop.max_ghost_particles` and the rod's, the cone's and the bodies' slip lengths, an empty
+//! `boundaries` section), so every experiment keeps the hash it had before they existed and
+//! files written then still verify. JSON is YAML, so the canonical text loads back through
+//! [`super::from_str`] to the same manifest and hash.
 
 use serde_json::Value;
 use sha2::{Digest, Sha256};

@@ -281,8 +281,8 @@ pub struct Mps {
     /// Radius of the strain rate's velocity gradient, in units of spacing (null: the
     /// number-density radius). A layer a few particles thick moving as a plug over a sheared
     /// bottom row reads shear in every row whose stencil reaches the wall; a stencil of the
-    /// first shell (1.5) keeps the shear where it is. In (1, max(number_density_radius,
-    /// laplacian_radius)].
+    /// first shell (1.5) keeps the shear where it is. In (1, 5] and at most
+    /// `laplacian_radius` (the neighbour lists' reach).
     #[serde(default)]
     pub strain_rate_radius: Option<f64>,
     /// Incremental scheme: the increment's equation built from the very divergence and

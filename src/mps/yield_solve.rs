@@ -63,8 +63,8 @@ pub(crate) struct StrainOperator<const D: usize> {
 
 impl<const D: usize> StrainOperator<D> {
     /// The corrected strain rate of each row's particle (`rows[k]`, `row_of` its inverse) over
-    /// the neighbours within the strain rate's radius: G_i = sum_j (u_j - u_i) b_ij^T, b_ij = M_i^-1 r_ij
-    /// w_ij / r_ij^2; a wall or dummy neighbour carries its own velocity times the frame's
+    /// the neighbours within the strain rate's radius: G_i = sum_j (u_j - u_i) b_ij^T,
+    /// b_ij = M_i^-1 r_ij w_ij / r_ij^2; a wall or dummy neighbour carries its own velocity times the frame's
     /// factor (as in `velocity_gradient`), which goes to e0.
     pub(crate) fn build(
         p: &Particles<D>,
