@@ -3,7 +3,10 @@
 //! the regularised law keeps creeping; and the carried multiplier makes such a run replay and
 //! resume bit for bit, on any thread count.
 use crate::common;
-use mps_runner::record::read_run;
+use mps_runner::experiment::Resolved;
+use mps_runner::record::{RunFile, read_run};
+use mps_runner::run::RunResult;
+use std::path::Path;
 
 /// The column at 20 mm (593 particles) under the quiet 2D set with the yield solve, stopped
 /// once 99 % of the fluid is non-flowing.
@@ -18,13 +21,19 @@ const SETS: [&str; 8] = [
     "mps.yield_penalty_pa_s=1000",
 ];
 
+/// The column under [`SETS`], the quiet 2D set and `extra`, run on two threads into `out_dir`.
+fn heap(extra: &[&str], out_dir: &Path) -> (Resolved, RunResult, RunFile) {
+    let sets = [&SETS[..], &common::QUIET_2D[..], extra].concat();
+    let resolved = common::resolve("column_collapse_2d.yaml", &sets);
+    let result = common::run_completed(&resolved, out_dir, 2);
+    let run = read_run(&result.path).unwrap();
+    (resolved, result, run)
+}
+
 #[test]
 fn a_heap_under_the_yield_solve_comes_to_rest_and_replays_bit_for_bit() {
     let dir = tempfile::tempdir().unwrap();
-    let sets = [&SETS[..], &common::QUIET_2D[..]].concat();
-    let resolved = common::resolve("column_collapse_2d.yaml", &sets);
-    let result = common::run_completed(&resolved, &dir.path().join("two"), 2);
-    let run = read_run(&result.path).unwrap();
+    let (resolved, result, run) = heap(&[], &dir.path().join("two"));
     let summary = run.summary.as_ref().unwrap();
     let stop_s = summary.metrics["stop_time_s"];
     let front_m = summary.metrics["front_position_m"];
@@ -68,15 +77,7 @@ fn a_heap_under_the_yield_solve_comes_to_rest_and_replays_bit_for_bit() {
 #[test]
 fn a_first_shell_strain_rate_brings_the_heap_to_the_full_bingham_length() {
     let dir = tempfile::tempdir().unwrap();
-    let sets = [
-        &SETS[..],
-        &common::QUIET_2D[..],
-        &["mps.strain_rate_radius=1.5"],
-    ]
-    .concat();
-    let resolved = common::resolve("column_collapse_2d.yaml", &sets);
-    let result = common::run_completed(&resolved, &dir.path().join("shell"), 2);
-    let run = read_run(&result.path).unwrap();
+    let (_, _, run) = heap(&["mps.strain_rate_radius=1.5"], &dir.path().join("shell"));
     let summary = run.summary.as_ref().unwrap();
     let front_m = summary.metrics["front_position_m"];
     let stop_s = summary.metrics["stop_time_s"];
