@@ -603,8 +603,7 @@ pub fn require_3d(m: &Manifest, c: &mut Checker, kind: &str, why: &str) {
 }
 
 /// Fails `field` (a scene's switch to mirror symmetry planes, when on) if the manifest asks
-/// for the exact projection, whose gradient rows have no mirror images, or the yield solve,
-/// whose strain-rate rows have none either.
+/// for the exact projection, whose gradient rows have no mirror images.
 pub fn refuse_planes_without_images(m: &Manifest, c: &mut Checker, field: &str, on: bool) {
     if on
         && m.mps.exact_projection
@@ -613,13 +612,6 @@ pub fn refuse_planes_without_images(m: &Manifest, c: &mut Checker, field: &str, 
         c.fail(
             field,
             "is not available with mps.exact_projection (its gradient rows have no mirror images)"
-                .into(),
-        );
-    }
-    if on && m.mps.yield_penalty_pa_s > 0.0 {
-        c.fail(
-            field,
-            "is not available with mps.yield_penalty_pa_s > 0 (its strain-rate rows have no mirror images)"
                 .into(),
         );
     }

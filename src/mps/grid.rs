@@ -111,7 +111,14 @@ impl Neighbours {
     /// A vector value of entry `e`'s particle as its mirror image carries it: the planes'
     /// normal components negated (unchanged for a plain entry).
     #[inline]
-    pub fn reflect<const D: usize>(&self, e: u32, mut v: Vector<D>) -> Vector<D> {
+    pub fn reflect<const D: usize>(&self, e: u32, v: Vector<D>) -> Vector<D> {
+        Self::reflected(e, v)
+    }
+
+    /// As [`Neighbours::reflect`], for `e` an entry or a column index that carries its plane
+    /// bits ([`Neighbours::plane_bits`]).
+    #[inline]
+    pub fn reflected<const D: usize>(e: u32, mut v: Vector<D>) -> Vector<D> {
         // A plain entry returns at once: this is read for every pair of the hot loops.
         let planes = e >> MIRROR_SHIFT;
         if planes != 0 {

@@ -49,13 +49,16 @@ pub struct YieldSolve {
 }
 
 /// The strain rate as a linear map of the unknown velocities (the viscous stage's rows):
-/// e_k = sym(sum over entries (c, a) of u_c a^T) + e0_k.
+/// e_k = sym(sum over entries (c, a) of S_c u_c a^T) + e0_k, where S_c negates the normal
+/// components of the mirror planes whose bits ride in column c (a mirror image's velocity,
+/// [`Neighbours::reflected`]; the identity without planes).
 pub(crate) struct StrainOperator<const D: usize> {
     offsets: Vec<usize>,
     columns: Vec<u32>,
     coefficients: Vec<Vector<D>>,
     constant: Vec<Tensor<D>>,
-    // The transpose: per unknown, its (row, coefficient) entries in row order.
+    // The transpose: per unknown, its (row, coefficient) entries in row order; a row index
+    // carries the entry's plane bits.
     t_offsets: Vec<usize>,
     t_rows: Vec<u32>,
     t_coefficients: Vec<Vector<D>>,
@@ -90,11 +93,12 @@ impl<const D: usize> StrainOperator<D> {
                 // M_i is symmetric: b^T = r^T M^-1 w / r^2.
                 let b = c.transpose() * r * (w / r2);
                 if p.kind[j] == ParticleKind::Fluid && row_of[j] != u32::MAX {
-                    entries.push((row_of[j], b));
+                    // i's own image too: (S u_i - u_i) b^T.
+                    entries.push((row_of[j] | Neighbours::plane_bits(e), b));
                     own -= b;
                 } else {
                     let f = frames.factor(slip_walls, j, &r);
-                    constant += p.velocity_m_s[j] * (b * f).transpose();
+                    constant += nb.reflect(e, p.velocity_m_s[j]) * (b * f).transpose();
                     own -= b * f;
                 }
             }
@@ -115,7 +119,7 @@ impl<const D: usize> StrainOperator<D> {
             for (c, a) in entries {
                 op.columns.push(c);
                 op.coefficients.push(a);
-                op.t_offsets[c as usize + 1] += 1;
+                op.t_offsets[entry_index(c) + 1] += 1;
             }
             op.offsets.push(op.columns.len());
             op.constant.push(constant);
@@ -128,8 +132,8 @@ impl<const D: usize> StrainOperator<D> {
         op.t_coefficients = vec![Vector::<D>::zeros(); op.columns.len()];
         for k in 0..rows.len() {
             for e in op.offsets[k]..op.offsets[k + 1] {
-                let c = op.columns[e] as usize;
-                op.t_rows[fill[c]] = k as u32;
+                let c = entry_index(op.columns[e]);
+                op.t_rows[fill[c]] = k as u32 | Neighbours::plane_bits(op.columns[e]);
                 op.t_coefficients[fill[c]] = op.coefficients[e];
                 fill[c] += 1;
             }
@@ -146,26 +150,29 @@ impl<const D: usize> StrainOperator<D> {
         map_particles(self.rows(), |k| {
             let mut g = Tensor::<D>::zeros();
             for e in self.offsets[k]..self.offsets[k + 1] {
-                let x = Vector::<D>::from(u[self.columns[e] as usize]);
+                let c = self.columns[e];
+                let x = Neighbours::reflected(c, Vector::<D>::from(u[entry_index(c)]));
                 g += x * self.coefficients[e].transpose();
             }
             (g + g.transpose()) * 0.5
         })
     }
 
-    /// E^T s for a field s of symmetric tensors (s : sym(u a^T) = u . s a).
+    /// E^T s for a field s of symmetric tensors (s : sym(S u a^T) = u . S s a).
     fn apply_transpose(&self, s: &[Tensor<D>]) -> Vec<[f64; D]> {
         map_particles(self.rows(), |c| {
             let mut v = Vector::<D>::zeros();
             for e in self.t_offsets[c]..self.t_offsets[c + 1] {
-                v += s[self.t_rows[e] as usize] * self.t_coefficients[e];
+                let k = self.t_rows[e];
+                v += Neighbours::reflected(k, s[entry_index(k)] * self.t_coefficients[e]);
             }
             v.into()
         })
     }
 
     /// The diagonal of E^T E per unknown and component: |sym(e_a c^T)|^2 = (|c|^2 + c_a^2)/2
-    /// summed over the unknown's entries.
+    /// summed over the unknown's entries (exact without mirror planes; with them a row that
+    /// holds a column and its image counts each apart: the Jacobi preconditioner only).
     fn normal_diagonal(&self) -> Vec<[f64; D]> {
         map_particles(self.rows(), |c| {
             let mut d = [0.0; D];
