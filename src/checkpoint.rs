@@ -17,8 +17,10 @@ pub fn canonical_bits(x: f64) -> u64 {
 /// array is non-empty: the marker `tag` and every tag (u32); and only when `extra_scalars`
 /// is non-empty: the marker `extra_scalars`, their count (u64) and every value (f64 bits,
 /// -0.0 as +0.0); and only when `yield_stress_pa` is non-empty: the marker `yield_stress_pa`,
-/// its count (u64) and every value (f64 bits, -0.0 as +0.0). These were added after the first
-/// files were written: a state without them hashes as it always did.
+/// its count (u64) and every value (f64 bits, -0.0 as +0.0); and only when
+/// `yield_penalty_pa_s` is non-zero: the marker `yield_penalty_pa_s` and its f64 bits. These
+/// were added after the first files were written: a state without them hashes as it always
+/// did.
 pub fn state_sha256(msg: &StateCheckpoint) -> String {
     let mut h = Sha256::new();
     h.update(b"mps.v1.state");
@@ -58,6 +60,10 @@ pub fn state_sha256(msg: &StateCheckpoint) -> String {
             h.update(canonical_bits(*v).to_le_bytes());
         }
     }
+    if msg.yield_penalty_pa_s != 0.0 {
+        h.update(b"yield_penalty_pa_s");
+        h.update(canonical_bits(msg.yield_penalty_pa_s).to_le_bytes());
+    }
     hex::encode(h.finalize())
 }
 
@@ -95,6 +101,7 @@ pub fn to_message<const D: usize>(index: u32, solver: &Solver<D>, dt_s: f64) -> 
             .iter()
             .flat_map(|s| s.transpose().iter().copied().collect::<Vec<f64>>())
             .collect(),
+        yield_penalty_pa_s: solver.yield_penalty_pa_s,
     };
     msg.state_sha256 = state_sha256(&msg);
     msg
@@ -191,7 +198,15 @@ pub fn solver_from_message<const D: usize>(
             stress.len()
         ));
     }
+    let penalty = msg.yield_penalty_pa_s;
+    if !(penalty.is_finite() && penalty >= 0.0) {
+        return Err(format!(
+            "checkpoint {}: yield penalty {penalty} Pa s is not a finite value >= 0",
+            msg.index
+        ));
+    }
     let mut solver = Solver::new(config, particles);
+    solver.yield_penalty_pa_s = penalty;
     solver.yield_stress_pa = stress
         .chunks_exact(D * D)
         .map(crate::mps::yield_solve::Tensor::<D>::from_row_slice)

@@ -95,6 +95,7 @@ pub fn canonical_text<S: SceneSection>(manifest: &Manifest<S>) -> String {
                 "yield_penalty_pa_s",
                 "yield_max_iterations",
                 "yield_tolerance_1_s",
+                "yield_penalty_adaptive",
             ] {
                 mps.remove(key);
             }
@@ -106,6 +107,10 @@ pub fn canonical_text<S: SceneSection>(manifest: &Manifest<S>) -> String {
             ("corrected_strain_rate", manifest.mps.corrected_strain_rate),
             ("wall_surface_no_slip", manifest.mps.wall_surface_no_slip),
             ("quadratic_strain_rate", manifest.mps.quadratic_strain_rate),
+            (
+                "yield_penalty_adaptive",
+                manifest.mps.yield_penalty_adaptive,
+            ),
             (
                 "exact_projection",
                 manifest.mps.exact_projection && incremental,

@@ -306,6 +306,11 @@ pub struct Mps {
     /// changed over the last iteration, within this equivalent shear rate everywhere, in 1/s.
     #[serde(default = "default_yield_tolerance_1_s")]
     pub yield_tolerance_1_s: f64,
+    /// Whether the penalty adapts by residual balancing (Boyd et al. 2011, sec. 3.4.1):
+    /// `yield_penalty_pa_s` is then where it starts, and the penalty reached is carried from
+    /// step to step (in the checkpoints). Off: the penalty stays fixed.
+    #[serde(default)]
+    pub yield_penalty_adaptive: bool,
     /// Artificial compressibility on the PPE diagonal, in 1/Pa.
     #[serde(default = "default_compressibility_1_pa")]
     pub compressibility_1_pa: f64,
@@ -398,6 +403,7 @@ impl Default for Mps {
             yield_penalty_pa_s: 0.0,
             yield_max_iterations: default_yield_max_iterations(),
             yield_tolerance_1_s: default_yield_tolerance_1_s(),
+            yield_penalty_adaptive: false,
             compressibility_1_pa: default_compressibility_1_pa(),
             collision_distance: default_collision_distance(),
             collision_restitution: default_collision_restitution(),

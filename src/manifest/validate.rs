@@ -302,6 +302,12 @@ pub fn check<S: SceneSection>(m: &Manifest<S>) -> Vec<Issue> {
             );
         }
     }
+    if p.yield_penalty_adaptive && p.yield_penalty_pa_s == 0.0 {
+        c.fail(
+            "mps.yield_penalty_adaptive",
+            "needs mps.yield_penalty_pa_s > 0 (the penalty it starts from)".to_string(),
+        );
+    }
     if p.quadratic_strain_rate && p.corrected_strain_rate {
         c.fail(
             "mps.quadratic_strain_rate",

@@ -279,6 +279,9 @@ pub struct Solver<const D: usize> {
     pub strain_invariant: Vec<f64>,
     /// With the yield solve, each particle's yield stress multiplier from the last step (Pa).
     pub yield_stress_pa: Vec<Tensor<D>>,
+    /// The yield solve's adaptive penalty carried to the next step, in Pa s (0: none, the
+    /// manifest's penalty; always 0 without `mps.yield_penalty_adaptive`).
+    pub yield_penalty_pa_s: f64,
     neighbours: Neighbours,
     /// Pairs of `neighbours` within the kernel radii at the current positions.
     pairs: KernelPairs,
@@ -333,6 +336,7 @@ impl<const D: usize> Solver<D> {
             step: 0,
             strain_invariant: Vec::new(),
             yield_stress_pa: Vec::new(),
+            yield_penalty_pa_s: 0.0,
             neighbours: Neighbours::default(),
             pairs: KernelPairs::default(),
             paired_at_m: Vec::new(),
@@ -456,6 +460,7 @@ impl<const D: usize> Solver<D> {
                 body_force_m_s2: self.gravity(),
                 pressure_accel_m_s2: pressure_accel.as_deref(),
                 yield_stress_pa: &self.yield_stress_pa,
+                yield_penalty_pa_s: self.yield_penalty_pa_s,
             },
             dt_s,
         );
@@ -477,6 +482,7 @@ impl<const D: usize> Solver<D> {
         let non_flowing_fraction = self.non_flowing_fraction(&stage.strain_invariant);
         self.strain_invariant = stage.strain_invariant;
         self.yield_stress_pa = stage.yield_stress_pa;
+        self.yield_penalty_pa_s = stage.yield_penalty_pa_s;
         // (6) r* = r + dt u*.
         {
             let p = &mut self.particles;

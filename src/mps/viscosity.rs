@@ -192,6 +192,9 @@ pub struct ViscousStage<const D: usize> {
     /// With the yield solve, the yield part of each particle's stress (its multiplier, in Pa;
     /// zero for non-fluid), carried to the next step; empty without it.
     pub yield_stress_pa: Vec<Tensor<D>>,
+    /// With the yield solve's adaptive penalty, the penalty the next step starts from (Pa s);
+    /// 0 otherwise.
+    pub yield_penalty_pa_s: f64,
 }
 
 /// Velocity gradient G_ab = d u_a / d x_b at fluid particle i by the gradient model (eq. 3,
@@ -371,6 +374,9 @@ pub struct Loads<'a, const D: usize> {
     pub pressure_accel_m_s2: Option<&'a [Vector<D>]>,
     /// The yield solve's multiplier per particle from the last step (empty: none yet).
     pub yield_stress_pa: &'a [Tensor<D>],
+    /// The yield solve's adaptive penalty from the last step (0: none yet, start from the
+    /// settings' penalty).
+    pub yield_penalty_pa_s: f64,
 }
 
 impl<const D: usize> Loads<'_, D> {
@@ -380,6 +386,7 @@ impl<const D: usize> Loads<'_, D> {
             body_force_m_s2,
             pressure_accel_m_s2: None,
             yield_stress_pa: &[],
+            yield_penalty_pa_s: 0.0,
         }
     }
 }
@@ -412,6 +419,7 @@ pub fn predict_velocity<const D: usize>(
         body_force_m_s2,
         pressure_accel_m_s2,
         yield_stress_pa: carried_stress_pa,
+        yield_penalty_pa_s: carried_penalty_pa_s,
     } = loads;
     let rho = settings.density_kg_m3;
     let n = p.len();
@@ -490,6 +498,7 @@ pub fn predict_velocity<const D: usize>(
             strain_invariant: strain,
             solve,
             yield_stress_pa: Vec::new(),
+            yield_penalty_pa_s: 0.0,
         };
     }
     let mut row_of = vec![u32::MAX; n];
@@ -604,6 +613,11 @@ pub fn predict_velocity<const D: usize>(
             &b,
             &mut x,
             carried,
+            if yield_settings.adaptive && carried_penalty_pa_s > 0.0 {
+                carried_penalty_pa_s
+            } else {
+                yield_settings.penalty_pa_s
+            },
             plastic,
             yield_stress_pa,
             &yield_settings,
@@ -623,6 +637,11 @@ pub fn predict_velocity<const D: usize>(
             strain_invariant: strain,
             solve: outcome.solve,
             yield_stress_pa: stress,
+            yield_penalty_pa_s: if yield_settings.adaptive {
+                outcome.penalty_pa_s
+            } else {
+                0.0
+            },
         };
     }
     let reports = solve_pcg_many(
@@ -651,6 +670,7 @@ pub fn predict_velocity<const D: usize>(
         strain_invariant: strain,
         solve,
         yield_stress_pa: Vec::new(),
+        yield_penalty_pa_s: 0.0,
     }
 }
 

@@ -46,7 +46,15 @@ pub struct YieldSolve {
     /// Converged when the equivalent shear rate of e(u) - gamma and of gamma's change over an
     /// iteration are both below this everywhere, in 1/s.
     pub tolerance_1_s: f64,
+    /// Whether the penalty adapts by residual balancing (see [`solve`]); `penalty_pa_s` is
+    /// then where the first step starts and the largest it takes.
+    pub adaptive: bool,
 }
+
+/// Residual balancing (He, Yang & Wang 2000; Boyd et al. 2011, sec. 3.4.1): the penalty is
+/// doubled when e(u) - gamma exceeds gamma's change over the iteration by this factor, and
+/// halved in the opposite case.
+const BALANCE_RATIO: f64 = 10.0;
 
 /// The strain rate as a linear map of the unknown velocities (the viscous stage's rows):
 /// e_k = sym(sum over entries (c, a) of S_c u_c a^T) + e0_k, where S_c negates the normal
@@ -194,6 +202,8 @@ pub(crate) struct YieldOutcome<const D: usize> {
     pub strain_rate: Vec<Tensor<D>>,
     /// lambda per row, in Pa.
     pub stress_pa: Vec<Tensor<D>>,
+    /// The penalty at the end of the step, in Pa s (the start's unless adaptive).
+    pub penalty_pa_s: f64,
     /// CG iterations summed over the u steps, the largest relative residual, and whether the
     /// iterations met their tolerance.
     pub solve: SolveReport,
@@ -202,7 +212,14 @@ pub(crate) struct YieldOutcome<const D: usize> {
 /// The augmented-Lagrangian iterations of the module's header. `matrix` and `b` are the
 /// viscous stage's plastic system as assembled by `predict_velocity`, rows divided by
 /// dt mu_p / rho (so mu_p matrix is rho/dt + mu_p L); `x` holds the start guess and returns
-/// the velocity; `carried` is lambda per row from the last step.
+/// the velocity; `carried` is lambda per row from the last step; `penalty_pa_s` the penalty r
+/// to start from. With `settings.adaptive`, an iteration that did not converge rebalances r
+/// ([`BALANCE_RATIO`]): a large r drives e(u) to gamma fast but moves gamma slowly, a small r
+/// the opposite, and the step stops only when both are small. r never exceeds
+/// `settings.penalty_pa_s`: in a rigid region gamma stays 0, so its change is no measure of
+/// r, and a growing r there left a 10 mm heap hovering at the tolerance until it yielded
+/// again (docs/validation.md). lambda is kept (it is the stress, not scaled by r), so only the
+/// preconditioner changes with r.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn solve<const D: usize>(
     op: &StrainOperator<D>,
@@ -210,6 +227,7 @@ pub(crate) fn solve<const D: usize>(
     b: &[[f64; D]],
     x: &mut [[f64; D]],
     carried: Vec<Tensor<D>>,
+    penalty_pa_s: f64,
     plastic_viscosity_pa_s: f64,
     yield_stress_pa: f64,
     settings: &YieldSolve,
@@ -218,9 +236,9 @@ pub(crate) fn solve<const D: usize>(
 ) -> YieldOutcome<D> {
     let n = op.rows();
     let mu = plastic_viscosity_pa_s;
-    let r = settings.penalty_pa_s;
+    let mut r = penalty_pa_s;
     let limit = std::f64::consts::SQRT_2 * yield_stress_pa;
-    let shrink = |theta: &Tensor<D>| {
+    let shrink = |theta: &Tensor<D>, r: f64| {
         let size = theta.norm();
         if size <= limit {
             Tensor::<D>::zeros()
@@ -228,16 +246,17 @@ pub(crate) fn solve<const D: usize>(
             theta * ((size - limit) / (r * size))
         }
     };
-    let inv_diag: Vec<[f64; D]> = {
-        let normal = op.normal_diagonal();
+    let normal = op.normal_diagonal();
+    let inverse_diagonal = |r: f64| -> Vec<[f64; D]> {
         map_particles(n, |k| {
             std::array::from_fn(|m| 1.0 / (mu * matrix.diagonal_of(k, m) + r * normal[k][m]))
         })
     };
+    let mut inv_diag = inverse_diagonal(r);
     let mut lambda = carried;
     let mut e = op.apply(x);
     let mut gamma: Vec<Tensor<D>> =
-        map_particles(n, |k| shrink(&(lambda[k] + (e[k] + op.constant[k]) * r)));
+        map_particles(n, |k| shrink(&(lambda[k] + (e[k] + op.constant[k]) * r), r));
     // Not reaching the yield tolerance in max_iterations is not an error: the multiplier
     // carries on into the next step. A u step that failed its tolerance is.
     let mut report = SolveReport {
@@ -273,7 +292,7 @@ pub(crate) fn solve<const D: usize>(
         e = op.apply(x);
         let next: Vec<(Tensor<D>, Tensor<D>)> = map_particles(n, |k| {
             let theta = lambda[k] + (e[k] + op.constant[k]) * r;
-            let g = shrink(&theta);
+            let g = shrink(&theta, r);
             (g, theta - g * r)
         });
         let change = max_by(n, |k| (next[k].0 - gamma[k]).norm());
@@ -284,10 +303,24 @@ pub(crate) fn solve<const D: usize>(
         if mismatch <= tolerance && change <= tolerance {
             break;
         }
+        if settings.adaptive {
+            let balanced = if mismatch > BALANCE_RATIO * change {
+                (r * 2.0).min(settings.penalty_pa_s)
+            } else if change > BALANCE_RATIO * mismatch {
+                r * 0.5
+            } else {
+                r
+            };
+            if balanced != r {
+                r = balanced;
+                inv_diag = inverse_diagonal(r);
+            }
+        }
     }
     YieldOutcome {
         strain_rate: gamma,
         stress_pa: lambda,
+        penalty_pa_s: r,
         solve: report,
     }
 }

@@ -220,6 +220,7 @@ pub fn run_info(path: &Path, size_bytes: u64, run: &RunFile) -> RunInfo {
                 "yield_penalty_pa_s",
                 "yield_max_iterations",
                 "yield_tolerance_1_s",
+                "yield_penalty_adaptive",
             ] {
                 if let Some(v) = mps.and_then(|mps| mps.get(key)) {
                     text.push_str(&format!(", mps.{key} {v}"));

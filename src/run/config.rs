@@ -55,6 +55,7 @@ pub fn solver_config<const D: usize>(m: &Manifest, scene: &Scene<D>) -> SolverCo
             penalty_pa_s: m.mps.yield_penalty_pa_s,
             max_iterations: m.mps.yield_max_iterations,
             tolerance_1_s: m.mps.yield_tolerance_1_s,
+            adaptive: m.mps.yield_penalty_adaptive,
         }),
         gravity_m_s2: m.gravity_m_s2,
         gravity_tilt_rad: scene.gravity_tilt_rad,

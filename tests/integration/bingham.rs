@@ -69,6 +69,7 @@ fn bingham_poiseuille(
                 body_force_m_s2: force,
                 pressure_accel_m_s2: None,
                 yield_stress_pa: &stress,
+                yield_penalty_pa_s: 0.0,
             },
             dt_s,
         );
@@ -246,6 +247,7 @@ fn yield_solve_gives_a_rigid_plug_and_the_closed_form() {
         penalty_pa_s: 50.0,
         max_iterations: 200,
         tolerance_1_s: 1e-6,
+        adaptive: false,
     };
     let (y, u, pi) = bingham_poiseuille(rheology, false, Some(solve), cells);
     let rigid_edge = y

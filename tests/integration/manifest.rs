@@ -858,6 +858,11 @@ fn invalid_values_are_named_and_located() {
             .canonical
             .contains("strain_rate_radius")
     );
+    // The adaptive penalty's switch, off, is no part of the experiment either.
+    assert_eq!(
+        ok_with(MINIMAL, &["mps.yield_penalty_adaptive=false"]).hash_hex,
+        ok_with(MINIMAL, &[]).hash_hex
+    );
 
     // from an override: no line, says so
     let e = err_with(MINIMAL, &["time.courant=1.5"]);

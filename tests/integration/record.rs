@@ -59,6 +59,7 @@ fn state(index: u32, salt: f64) -> StateCheckpoint {
         extra_scalars: vec![],
         tag: vec![],
         yield_stress_pa: vec![],
+        yield_penalty_pa_s: 0.0,
     }
 }
 
