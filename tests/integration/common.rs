@@ -149,3 +149,12 @@ pub const QUIET_2D: [&str; 6] = [
     "mps.surface_depth=0.5",
     "mps.corrected_strain_rate=true",
 ];
+
+/// The quiet 3D set: the 2D set without the pressure regularisation (2D only).
+pub const QUIET_3D: [&str; 5] = [
+    "mps.pressure_scheme=incremental",
+    "mps.pair_stabilisation=0.8",
+    "mps.wall_support=0.95",
+    "mps.surface_depth=0.5",
+    "mps.corrected_strain_rate=true",
+];

@@ -109,16 +109,7 @@ fn quarter_slump_is_the_whole_under_the_standard_scheme() {
 /// its 13th digit as much as against the quarter. MEASURED: 2.7e-14 m apart at 0.1 s.
 #[test]
 fn quarter_slump_is_the_whole_under_the_quiet_set() {
-    quarter_follows_the_whole(
-        0.1,
-        &[
-            "mps.pressure_scheme=incremental",
-            "mps.pair_stabilisation=0.8",
-            "mps.wall_support=0.95",
-            "mps.surface_depth=0.5",
-            "mps.corrected_strain_rate=true",
-        ],
-    );
+    quarter_follows_the_whole(0.1, &common::QUIET_3D);
 }
 
 /// The yield solve's strain-rate rows hold mirror images too (an image's velocity reflected
@@ -127,20 +118,13 @@ fn quarter_slump_is_the_whole_under_the_quiet_set() {
 /// velocity unreflected).
 #[test]
 fn quarter_slump_is_the_whole_under_the_yield_solve() {
-    quarter_follows_the_whole(
-        0.1,
-        &[
-            "mps.pressure_scheme=incremental",
-            "mps.pair_stabilisation=0.8",
-            "mps.wall_support=0.95",
-            "mps.surface_depth=0.5",
-            "mps.corrected_strain_rate=true",
-            "fluid.stress_gradient_term=false",
-            "mps.wall_surface_no_slip=true",
-            "mps.yield_penalty_pa_s=1000",
-            "mps.strain_rate_radius=1.5",
-        ],
-    );
+    let yield_flags = [
+        "fluid.stress_gradient_term=false",
+        "mps.wall_surface_no_slip=true",
+        "mps.yield_penalty_pa_s=1000",
+        "mps.strain_rate_radius=1.5",
+    ];
+    quarter_follows_the_whole(0.1, &[&common::QUIET_3D[..], &yield_flags].concat());
 }
 
 /// A quarter run replays bit for bit on one thread from a two-thread run's checkpoint: the
