@@ -56,6 +56,11 @@ pub struct YieldSolve {
 /// halved in the opposite case.
 const BALANCE_RATIO: f64 = 10.0;
 
+/// The balanced penalty's floor, as a fraction of `YieldSolve::penalty_pa_s`: a guard that
+/// keeps r (a divisor in the law's step) away from 0 however long the halving goes on; the
+/// runs measured stayed above 0.03.
+const MIN_PENALTY_FRACTION: f64 = 1e-6;
+
 /// The strain rate as a linear map of the unknown velocities (the viscous stage's rows):
 /// e_k = sym(sum over entries (c, a) of S_c u_c a^T) + e0_k, where S_c negates the normal
 /// components of the mirror planes whose bits ride in column c (a mirror image's velocity,
@@ -307,7 +312,7 @@ pub(crate) fn solve<const D: usize>(
             let balanced = if mismatch > BALANCE_RATIO * change {
                 (r * 2.0).min(settings.penalty_pa_s)
             } else if change > BALANCE_RATIO * mismatch {
-                r * 0.5
+                (r * 0.5).max(settings.penalty_pa_s * MIN_PENALTY_FRACTION)
             } else {
                 r
             };
