@@ -613,11 +613,7 @@ pub fn predict_velocity<const D: usize>(
             &b,
             &mut x,
             carried,
-            if yield_settings.adaptive && carried_penalty_pa_s > 0.0 {
-                carried_penalty_pa_s
-            } else {
-                yield_settings.penalty_pa_s
-            },
+            carried_penalty_pa_s,
             plastic,
             yield_stress_pa,
             &yield_settings,
@@ -637,11 +633,7 @@ pub fn predict_velocity<const D: usize>(
             strain_invariant: strain,
             solve: outcome.solve,
             yield_stress_pa: stress,
-            yield_penalty_pa_s: if yield_settings.adaptive {
-                outcome.penalty_pa_s
-            } else {
-                0.0
-            },
+            yield_penalty_pa_s: outcome.penalty_pa_s,
         };
     }
     let reports = solve_pcg_many(

@@ -207,7 +207,8 @@ pub(crate) struct YieldOutcome<const D: usize> {
     pub strain_rate: Vec<Tensor<D>>,
     /// lambda per row, in Pa.
     pub stress_pa: Vec<Tensor<D>>,
-    /// The penalty at the end of the step, in Pa s (the start's unless adaptive).
+    /// With the adaptive penalty, the penalty at the end of the step, in Pa s, carried to the
+    /// next; 0 otherwise.
     pub penalty_pa_s: f64,
     /// CG iterations summed over the u steps, the largest relative residual, and whether the
     /// iterations met their tolerance.
@@ -217,8 +218,8 @@ pub(crate) struct YieldOutcome<const D: usize> {
 /// The augmented-Lagrangian iterations of the module's header. `matrix` and `b` are the
 /// viscous stage's plastic system as assembled by `predict_velocity`, rows divided by
 /// dt mu_p / rho (so mu_p matrix is rho/dt + mu_p L); `x` holds the start guess and returns
-/// the velocity; `carried` is lambda per row from the last step; `penalty_pa_s` the penalty r
-/// to start from. With `settings.adaptive`, an iteration that did not converge rebalances r
+/// the velocity; `carried` is lambda per row from the last step; `carried_penalty_pa_s` the
+/// adaptive penalty from the last step (0: none yet, start from `settings.penalty_pa_s`). With `settings.adaptive`, an iteration that did not converge rebalances r
 /// ([`BALANCE_RATIO`]): a large r drives e(u) to gamma fast but moves gamma slowly, a small r
 /// the opposite, and the step stops only when both are small. r never exceeds
 /// `settings.penalty_pa_s`: in a rigid region gamma stays 0, so its change is no measure of
@@ -232,7 +233,7 @@ pub(crate) fn solve<const D: usize>(
     b: &[[f64; D]],
     x: &mut [[f64; D]],
     carried: Vec<Tensor<D>>,
-    penalty_pa_s: f64,
+    carried_penalty_pa_s: f64,
     plastic_viscosity_pa_s: f64,
     yield_stress_pa: f64,
     settings: &YieldSolve,
@@ -241,7 +242,11 @@ pub(crate) fn solve<const D: usize>(
 ) -> YieldOutcome<D> {
     let n = op.rows();
     let mu = plastic_viscosity_pa_s;
-    let mut r = penalty_pa_s;
+    let mut r = if settings.adaptive && carried_penalty_pa_s > 0.0 {
+        carried_penalty_pa_s
+    } else {
+        settings.penalty_pa_s
+    };
     let limit = std::f64::consts::SQRT_2 * yield_stress_pa;
     let shrink = |theta: &Tensor<D>, r: f64| {
         let size = theta.norm();
@@ -325,7 +330,7 @@ pub(crate) fn solve<const D: usize>(
     YieldOutcome {
         strain_rate: gamma,
         stress_pa: lambda,
-        penalty_pa_s: r,
+        penalty_pa_s: if settings.adaptive { r } else { 0.0 },
         solve: report,
     }
 }
