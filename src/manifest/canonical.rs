@@ -11,7 +11,8 @@
 //! `mps.pressure_regularisation` (with `mps.regularisation_radius`), `mps.surface_depth` and
 //! `mps.particle_shifting` (with `mps.particle_shifting_limit`) at 0 (and under the standard
 //! scheme), `mps.pressure_floor_pa` at 0, `mps.yield_penalty_pa_s` at 0 (with
-//! `mps.yield_max_iterations` and `mps.yield_tolerance_1_s`), `mps.corrected_strain_rate`,
+//! `mps.yield_max_iterations` and `mps.yield_tolerance_1_s`; `mps.yield_velocity_fraction`
+//! also at 0), `mps.corrected_strain_rate`,
 //! `mps.wall_surface_no_slip`, `mps.quadratic_strain_rate` and `mps.exact_projection` (also
 //! under the standard scheme) false, `stop.rest_*` without `stop.rest_metric`, null
 //! `mps.wall_collision_*`, `mps.strain_rate_radius`, `time.dt_min_s`,
@@ -82,6 +83,10 @@ pub fn canonical_text<S: SceneSection>(manifest: &Manifest<S>) -> String {
         if manifest.mps.pressure_floor_pa == 0.0 {
             mps.remove("pressure_floor_pa");
         }
+        // 0 is the yield solve's velocity steps at the viscous tolerance, as before the field.
+        if manifest.mps.yield_velocity_fraction == 0.0 {
+            mps.remove("yield_velocity_fraction");
+        }
         // The radius is read only with the regularisation on, the limit only with shifting.
         if !mps.contains_key("pressure_regularisation") {
             mps.remove("regularisation_radius");
@@ -96,6 +101,7 @@ pub fn canonical_text<S: SceneSection>(manifest: &Manifest<S>) -> String {
                 "yield_max_iterations",
                 "yield_tolerance_1_s",
                 "yield_penalty_adaptive",
+                "yield_velocity_fraction",
             ] {
                 mps.remove(key);
             }

@@ -311,6 +311,11 @@ pub struct Mps {
     /// step to step (in the checkpoints). Off: the penalty stays fixed.
     #[serde(default)]
     pub yield_penalty_adaptive: bool,
+    /// Each iteration's velocity solve stops once its residual bounds the strain-rate error it
+    /// leaves to this fraction of `yield_tolerance_1_s` (`src/mps/yield_solve.rs`, inexact
+    /// u steps); 0 = solve to `viscosity_tolerance`, as before.
+    #[serde(default)]
+    pub yield_velocity_fraction: f64,
     /// Artificial compressibility on the PPE diagonal, in 1/Pa.
     #[serde(default = "default_compressibility_1_pa")]
     pub compressibility_1_pa: f64,
@@ -404,6 +409,7 @@ impl Default for Mps {
             yield_max_iterations: default_yield_max_iterations(),
             yield_tolerance_1_s: default_yield_tolerance_1_s(),
             yield_penalty_adaptive: false,
+            yield_velocity_fraction: 0.0,
             compressibility_1_pa: default_compressibility_1_pa(),
             collision_distance: default_collision_distance(),
             collision_restitution: default_collision_restitution(),

@@ -253,6 +253,11 @@ pub fn check<S: SceneSection>(m: &Manifest<S>) -> Vec<Issue> {
     ) && p.yield_penalty_pa_s > 0.0
     {
         c.real("mps.yield_tolerance_1_s", p.yield_tolerance_1_s, POSITIVE);
+        c.real(
+            "mps.yield_velocity_fraction",
+            p.yield_velocity_fraction,
+            between(0.0, true, 1.0, false),
+        );
         if c.int_at_least("mps.yield_max_iterations", p.yield_max_iterations.into(), 1)
             && p.yield_max_iterations > 10_000
         {
@@ -306,6 +311,13 @@ pub fn check<S: SceneSection>(m: &Manifest<S>) -> Vec<Issue> {
         c.fail(
             "mps.yield_penalty_adaptive",
             "needs mps.yield_penalty_pa_s > 0 (the penalty it starts from)".to_string(),
+        );
+    }
+    if p.yield_velocity_fraction != 0.0 && p.yield_penalty_pa_s == 0.0 {
+        c.fail(
+            "mps.yield_velocity_fraction",
+            "needs mps.yield_penalty_pa_s > 0 (it sets how far the yield solve's velocity steps go)"
+                .to_string(),
         );
     }
     if p.quadratic_strain_rate && p.corrected_strain_rate {

@@ -617,6 +617,7 @@ pub fn predict_velocity<const D: usize>(
             plastic,
             yield_stress_pa,
             &yield_settings,
+            rho / dt_s,
             settings.tolerance,
             settings.max_iterations,
         );

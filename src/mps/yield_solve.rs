@@ -49,6 +49,10 @@ pub struct YieldSolve {
     /// Whether the penalty adapts by residual balancing (see [`solve`]); `penalty_pa_s` is
     /// then where the first step starts and the largest it takes.
     pub adaptive: bool,
+    /// Inexact u steps: each CG solve stops once its residual bounds the strain-rate error it
+    /// leaves to this fraction of `tolerance_1_s` (see [`solve`]); 0: to the viscous
+    /// stage's relative tolerance.
+    pub velocity_fraction: f64,
 }
 
 /// Residual balancing (He, Yang & Wang 2000; Boyd et al. 2011, sec. 3.4.1): the penalty is
@@ -226,6 +230,12 @@ pub(crate) struct YieldOutcome<const D: usize> {
 /// r, and a growing r there left a 10 mm heap hovering at the tolerance until it yielded
 /// again (docs/validation.md). lambda is kept (it is the stress, not scaled by r), so only the
 /// preconditioner changes with r.
+///
+/// With `settings.velocity_fraction` f > 0 a u step stops at a residual rho with
+/// |rho| <= f (tol / sqrt 2) 2 sqrt(a r), a = `mass_rate` (rho/dt): the u system is at least
+/// a I + r E^T E, and |E A^-1 v| <= |v| / (2 sqrt(a r)) for such an A (E's singular values s
+/// give s / (a + r s^2) <= 1 / (2 sqrt(a r))), so the strain rate the inexact u carries is off
+/// by at most f times what the stopping test below can see, in every row.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn solve<const D: usize>(
     op: &StrainOperator<D>,
@@ -237,6 +247,7 @@ pub(crate) fn solve<const D: usize>(
     plastic_viscosity_pa_s: f64,
     yield_stress_pa: f64,
     settings: &YieldSolve,
+    mass_rate_pa_s_m2: f64,
     cg_tolerance: f64,
     cg_max_iterations: u32,
 ) -> YieldOutcome<D> {
@@ -262,6 +273,9 @@ pub(crate) fn solve<const D: usize>(
             std::array::from_fn(|m| 1.0 / (mu * matrix.diagonal_of(k, m) + r * normal[k][m]))
         })
     };
+    let tolerance = settings.tolerance_1_s / std::f64::consts::SQRT_2;
+    let residual_floor =
+        |r: f64| settings.velocity_fraction * tolerance * 2.0 * (mass_rate_pa_s_m2 * r).sqrt();
     let mut inv_diag = inverse_diagonal(r);
     let mut lambda = carried;
     let mut e = op.apply(x);
@@ -293,7 +307,15 @@ pub(crate) fn solve<const D: usize>(
                     }
                 });
         };
-        let cg = conjugate_gradient(apply, &inv_diag, &rhs, x, cg_tolerance, cg_max_iterations);
+        let cg = conjugate_gradient(
+            apply,
+            &inv_diag,
+            &rhs,
+            x,
+            cg_tolerance,
+            residual_floor(r),
+            cg_max_iterations,
+        );
         report.iterations += cg.iterations;
         if cg.relative_residual.is_nan() || cg.relative_residual > report.relative_residual {
             report.relative_residual = cg.relative_residual;
@@ -309,7 +331,6 @@ pub(crate) fn solve<const D: usize>(
         gamma = next.iter().map(|v| v.0).collect();
         lambda = next.into_iter().map(|v| v.1).collect();
         let mismatch = max_by(n, |k| (e[k] + op.constant[k] - gamma[k]).norm());
-        let tolerance = settings.tolerance_1_s / std::f64::consts::SQRT_2;
         if mismatch <= tolerance && change <= tolerance {
             break;
         }
@@ -337,12 +358,16 @@ pub(crate) fn solve<const D: usize>(
 
 /// Jacobi-preconditioned CG for a matrix given as a product, over vectors of D components
 /// per row (the components are coupled). Order-fixed reductions (docs/design.md section 6).
+/// Stops at a residual of `tolerance` relative to b, or of `floor` in absolute terms, the
+/// larger of the two.
+#[allow(clippy::too_many_arguments)]
 fn conjugate_gradient<const D: usize>(
     apply: impl Fn(&[[f64; D]], &mut [[f64; D]]),
     inv_diag: &[[f64; D]],
     b: &[[f64; D]],
     x: &mut [[f64; D]],
     tolerance: f64,
+    floor: f64,
     max_iterations: u32,
 ) -> SolveReport {
     let n = b.len();
@@ -374,7 +399,8 @@ fn conjugate_gradient<const D: usize>(
     let mut rz = dot(&r, &z);
     let mut r_norm = dot(&r, &r).sqrt();
     let mut iterations = 0;
-    while r_norm > tolerance * b_norm && iterations < max_iterations {
+    let target = (tolerance * b_norm).max(floor);
+    while r_norm > target && iterations < max_iterations {
         apply(&p, &mut ap);
         let p_ap = dot(&p, &ap);
         if p_ap.is_nan() || p_ap <= 0.0 {
@@ -410,6 +436,6 @@ fn conjugate_gradient<const D: usize>(
     SolveReport {
         iterations,
         relative_residual,
-        converged: relative_residual <= tolerance,
+        converged: r_norm <= target,
     }
 }

@@ -221,6 +221,7 @@ pub fn run_info(path: &Path, size_bytes: u64, run: &RunFile) -> RunInfo {
                 "yield_max_iterations",
                 "yield_tolerance_1_s",
                 "yield_penalty_adaptive",
+                "yield_velocity_fraction",
             ] {
                 if let Some(v) = mps.and_then(|mps| mps.get(key)) {
                     text.push_str(&format!(", mps.{key} {v}"));

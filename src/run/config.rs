@@ -56,6 +56,7 @@ pub fn solver_config<const D: usize>(m: &Manifest, scene: &Scene<D>) -> SolverCo
             max_iterations: m.mps.yield_max_iterations,
             tolerance_1_s: m.mps.yield_tolerance_1_s,
             adaptive: m.mps.yield_penalty_adaptive,
+            velocity_fraction: m.mps.yield_velocity_fraction,
         }),
         gravity_m_s2: m.gravity_m_s2,
         gravity_tilt_rad: scene.gravity_tilt_rad,

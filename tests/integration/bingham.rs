@@ -14,7 +14,26 @@ fn bingham_poiseuille(
     stress_gradient_term: bool,
     yield_solve: Option<YieldSolve>,
     cells_per_half_width: i64,
-) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
+) -> Profile {
+    let (profile, _) = bingham_poiseuille_counted(
+        rheology,
+        stress_gradient_term,
+        yield_solve,
+        cells_per_half_width,
+    );
+    profile
+}
+
+/// Heights, velocities and Pi of one column of particles.
+type Profile = (Vec<f64>, Vec<f64>, Vec<f64>);
+
+/// [`bingham_poiseuille`] with the CG iterations of every step summed.
+fn bingham_poiseuille_counted(
+    rheology: Rheology,
+    stress_gradient_term: bool,
+    yield_solve: Option<YieldSolve>,
+    cells_per_half_width: i64,
+) -> (Profile, u64) {
     let h = 0.1;
     let l0 = h / cells_per_half_width as f64;
     let rho = 2300.0;
@@ -59,6 +78,7 @@ fn bingham_poiseuille(
     let dt_s = 0.05;
     let mut strain = Vec::new();
     let mut stress = Vec::new();
+    let mut iterations = 0u64;
     for step in 0..20_000 {
         let stage = predict_velocity(
             &p,
@@ -75,6 +95,7 @@ fn bingham_poiseuille(
         );
         stress = stage.yield_stress_pa;
         assert!(stage.solve.converged, "{:?}", stage.solve);
+        iterations += u64::from(stage.solve.iterations);
         let change = (0..p.len())
             .map(|i| (stage.velocity_m_s[i] - p.velocity_m_s[i]).norm())
             .fold(0.0, f64::max);
@@ -88,7 +109,7 @@ fn bingham_poiseuille(
     let y: Vec<f64> = column0.iter().map(|&i| p.position_m[i][1]).collect();
     let u: Vec<f64> = column0.iter().map(|&i| p.velocity_m_s[i][0]).collect();
     let pi: Vec<f64> = column0.iter().map(|&i| strain[i]).collect();
-    (y, u, pi)
+    ((y, u, pi), iterations)
 }
 
 /// Closed form of Bingham plane Poiseuille flow.
@@ -248,6 +269,7 @@ fn yield_solve_gives_a_rigid_plug_and_the_closed_form() {
         max_iterations: 200,
         tolerance_1_s: 1e-6,
         adaptive: false,
+        velocity_fraction: 0.0,
     };
     let (y, u, pi) = bingham_poiseuille(rheology, false, Some(solve), cells);
     let rigid_edge = y
@@ -477,5 +499,48 @@ fn viscosity_ratio_1000_is_stable_at_the_seed_time_step() {
     assert!(
         front > 0.02,
         "the concrete flowed into the channel: {front} m"
+    );
+}
+
+/// Inexact u steps (`mps.yield_velocity_fraction`): each CG solve of the yield solve stops
+/// at a residual that bounds the strain rate it leaves to a fraction of the solve's
+/// tolerance, so the steady profile is the exact steps' to within what that tolerance
+/// allows, with the same rigid plug.
+#[test]
+fn inexact_velocity_steps_keep_the_yield_solve_profile() {
+    let (tau, eta): (f64, f64) = (100.0, 50.0);
+    let cells = 20;
+    let rheology = Rheology::seed000(eta, tau, 1e-6);
+    let exact_steps = YieldSolve {
+        penalty_pa_s: 50.0,
+        max_iterations: 200,
+        tolerance_1_s: 1e-6,
+        adaptive: false,
+        velocity_fraction: 0.0,
+    };
+    let inexact_steps = YieldSolve {
+        velocity_fraction: 0.1,
+        ..exact_steps
+    };
+    let ((_, u_exact, pi_exact), cg_exact) =
+        bingham_poiseuille_counted(rheology, false, Some(exact_steps), cells);
+    let ((_, u_inexact, pi_inexact), cg_inexact) =
+        bingham_poiseuille_counted(rheology, false, Some(inexact_steps), cells);
+    eprintln!("CG iterations: exact u steps {cg_exact}, inexact {cg_inexact}");
+    let rigid = |pi: &[f64]| pi.iter().map(|pi| *pi == 0.0).collect::<Vec<_>>();
+    assert_eq!(rigid(&pi_exact), rigid(&pi_inexact), "the plug changed");
+    let apart = u_exact
+        .iter()
+        .zip(&u_inexact)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0, f64::max);
+    // A strain-rate error below the fraction of the tolerance over the half width h = 0.1 m.
+    let bound = inexact_steps.velocity_fraction * exact_steps.tolerance_1_s * 0.1;
+    eprintln!("inexact u steps: largest velocity difference {apart:.3e} m/s (bound {bound:.1e})");
+    assert!(apart < bound, "velocities {apart} apart, bound {bound}");
+    // Measured 123 890 and 89 073.
+    assert!(
+        cg_inexact * 10 < cg_exact * 9,
+        "inexact steps took {cg_inexact} CG iterations, exact {cg_exact}"
     );
 }

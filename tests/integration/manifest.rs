@@ -863,6 +863,25 @@ fn invalid_values_are_named_and_located() {
         ok_with(MINIMAL, &["mps.yield_penalty_adaptive=false"]).hash_hex,
         ok_with(MINIMAL, &[]).hash_hex
     );
+    // Nor are exact velocity steps in the yield solve (the inexact ones' fraction at 0).
+    let yield_solve = [
+        "mps.yield_penalty_pa_s=1000",
+        "mps.wall_surface_no_slip=true",
+        "fluid.stress_gradient_term=false",
+    ];
+    let heap = std::fs::read_to_string(common::experiment("column_collapse_2d.yaml")).unwrap();
+    let exact = ok_with(&heap, &yield_solve);
+    let mut sets = yield_solve.to_vec();
+    sets.push("mps.yield_velocity_fraction=0");
+    assert_eq!(ok_with(&heap, &sets).hash_hex, exact.hash_hex);
+    sets.push("mps.yield_velocity_fraction=0.1");
+    let inexact = ok_with(&heap, &sets);
+    assert_ne!(inexact.hash_hex, exact.hash_hex);
+    assert!(
+        inexact
+            .canonical
+            .contains(r#""yield_velocity_fraction":0.1"#)
+    );
 
     // from an override: no line, says so
     let e = err_with(MINIMAL, &["time.courant=1.5"]);

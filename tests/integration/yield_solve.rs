@@ -136,7 +136,7 @@ fn an_adaptive_penalty_brings_the_heap_to_rest_and_replays_from_its_checkpoints(
 /// The yield solve's fields are refused where they cannot work, naming the field.
 #[test]
 fn the_yield_solve_is_refused_without_its_conditions() {
-    let cases: [(&[&str], &str); 5] = [
+    let cases: [(&[&str], &str); 7] = [
         (
             &[
                 "mps.yield_penalty_pa_s=1000",
@@ -164,6 +164,19 @@ fn the_yield_solve_is_refused_without_its_conditions() {
         (
             &["mps.yield_penalty_adaptive=true"],
             "mps.yield_penalty_adaptive",
+        ),
+        (
+            &["mps.yield_velocity_fraction=0.1"],
+            "mps.yield_velocity_fraction",
+        ),
+        (
+            &[
+                "mps.yield_penalty_pa_s=1000",
+                "mps.wall_surface_no_slip=true",
+                "fluid.stress_gradient_term=false",
+                "mps.yield_velocity_fraction=1",
+            ],
+            "mps.yield_velocity_fraction",
         ),
     ];
     for (sets, field) in cases {
