@@ -250,6 +250,16 @@ fn bingham_poiseuille_plug_matches_closed_form() {
     }
 }
 
+/// The yield solve's settings for the Poiseuille flow: tight enough that the profile is the
+/// method's, not the iterations'.
+const POISEUILLE_SOLVE: YieldSolve = YieldSolve {
+    penalty_pa_s: 50.0,
+    max_iterations: 200,
+    tolerance_1_s: 1e-6,
+    adaptive: false,
+    velocity_fraction: 0.0,
+};
+
 /// Bingham's law with a rigid state (`mps.yield_penalty_pa_s`, the augmented Lagrangian of
 /// `yield_solve.rs`), with no-slip at the walls' surface for both the viscous and the yield
 /// term (`mps.wall_surface_no_slip`, which the yield solve requires): the plug is rigid (zero
@@ -264,13 +274,7 @@ fn yield_solve_gives_a_rigid_plug_and_the_closed_form() {
     let plug_velocity = (h * g - tau).powi(2) / (2.0 * eta * g);
     // The critical rate only classifies: a rigid particle has Pi = 0 exactly.
     let rheology = Rheology::seed000(eta, tau, 1e-6);
-    let solve = YieldSolve {
-        penalty_pa_s: 50.0,
-        max_iterations: 200,
-        tolerance_1_s: 1e-6,
-        adaptive: false,
-        velocity_fraction: 0.0,
-    };
+    let solve = POISEUILLE_SOLVE;
     let (y, u, pi) = bingham_poiseuille(rheology, false, Some(solve), cells);
     let rigid_edge = y
         .iter()
@@ -511,13 +515,7 @@ fn inexact_velocity_steps_keep_the_yield_solve_profile() {
     let (tau, eta): (f64, f64) = (100.0, 50.0);
     let cells = 20;
     let rheology = Rheology::seed000(eta, tau, 1e-6);
-    let exact_steps = YieldSolve {
-        penalty_pa_s: 50.0,
-        max_iterations: 200,
-        tolerance_1_s: 1e-6,
-        adaptive: false,
-        velocity_fraction: 0.0,
-    };
+    let exact_steps = POISEUILLE_SOLVE;
     let inexact_steps = YieldSolve {
         velocity_fraction: 0.1,
         ..exact_steps
