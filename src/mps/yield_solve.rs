@@ -231,11 +231,11 @@ pub(crate) struct YieldOutcome<const D: usize> {
 /// again (docs/validation.md). lambda is kept (it is the stress, not scaled by r), so only the
 /// preconditioner changes with r.
 ///
-/// With `settings.velocity_fraction` f > 0 a u step stops at a residual rho with
-/// |rho| <= f (tol / sqrt 2) 2 sqrt(a r), a = `mass_rate` (rho/dt): the u system is at least
-/// a I + r E^T E, and |E A^-1 v| <= |v| / (2 sqrt(a r)) for such an A (E's singular values s
-/// give s / (a + r s^2) <= 1 / (2 sqrt(a r))), so the strain rate the inexact u carries is off
-/// by at most f times what the stopping test below can see, in every row.
+/// With `settings.velocity_fraction` f > 0 a u step stops at a residual res with
+/// |res| <= f (tol / sqrt 2) 2 sqrt(a r), a = `mass_rate_pa_s_m2` (rho/dt): the u system is at
+/// least a I + r E^T E, and |E A^-1 v| <= |v| / (2 sqrt(a r)) for such an A (E's singular
+/// values s give s / (a + r s^2) <= 1 / (2 sqrt(a r))), so the strain rate the inexact u
+/// carries is off by at most f times what the stopping test below can see, in every row.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn solve<const D: usize>(
     op: &StrainOperator<D>,
