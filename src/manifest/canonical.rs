@@ -11,10 +11,9 @@
 //! `mps.pressure_regularisation` (with `mps.regularisation_radius`), `mps.surface_depth` and
 //! `mps.particle_shifting` (with `mps.particle_shifting_limit`) at 0 (and under the standard
 //! scheme), `mps.pressure_floor_pa` at 0, `mps.yield_penalty_pa_s` at 0 (with
-//! `mps.yield_max_iterations` and `mps.yield_tolerance_1_s`; `mps.yield_velocity_fraction`
-//! also at 0), `mps.corrected_strain_rate`,
-//! `mps.wall_surface_no_slip`, `mps.quadratic_strain_rate` and `mps.exact_projection` (also
-//! under the standard scheme) false, `stop.rest_*` without `stop.rest_metric`, null
+//! `mps.yield_max_iterations` and `mps.yield_tolerance_1_s`), `mps.yield_velocity_fraction` at
+//! 0, `mps.corrected_strain_rate`, `mps.wall_surface_no_slip`, `mps.quadratic_strain_rate`
+//! and `mps.exact_projection` (also under the standard scheme) false, `stop.rest_*` without `stop.rest_metric`, null
 //! `mps.wall_collision_*`, `mps.strain_rate_radius`, `time.dt_min_s`,
 //! `stop.max_ghost_particles` and the rod's, the cone's and the bodies' slip lengths, an empty
 //! `boundaries` section), so every experiment keeps the hash it had before they existed and
@@ -101,7 +100,6 @@ pub fn canonical_text<S: SceneSection>(manifest: &Manifest<S>) -> String {
                 "yield_max_iterations",
                 "yield_tolerance_1_s",
                 "yield_penalty_adaptive",
-                "yield_velocity_fraction",
             ] {
                 mps.remove(key);
             }

@@ -223,7 +223,8 @@ pub(crate) struct YieldOutcome<const D: usize> {
 /// viscous stage's plastic system as assembled by `predict_velocity`, rows divided by
 /// dt mu_p / rho (so mu_p matrix is rho/dt + mu_p L); `x` holds the start guess and returns
 /// the velocity; `carried` is lambda per row from the last step; `carried_penalty_pa_s` the
-/// adaptive penalty from the last step (0: none yet, start from `settings.penalty_pa_s`). With `settings.adaptive`, an iteration that did not converge rebalances r
+/// adaptive penalty from the last step (0: none yet, start from `settings.penalty_pa_s`).
+/// With `settings.adaptive`, an iteration that did not converge rebalances r
 /// ([`BALANCE_RATIO`]): a large r drives e(u) to gamma fast but moves gamma slowly, a small r
 /// the opposite, and the step stops only when both are small. r never exceeds
 /// `settings.penalty_pa_s`: in a rigid region gamma stays 0, so its change is no measure of
@@ -360,7 +361,6 @@ pub(crate) fn solve<const D: usize>(
 /// per row (the components are coupled). Order-fixed reductions (docs/design.md section 6).
 /// Stops at a residual of `tolerance` relative to b, or of `floor` in absolute terms, the
 /// larger of the two.
-#[allow(clippy::too_many_arguments)]
 fn conjugate_gradient<const D: usize>(
     apply: impl Fn(&[[f64; D]], &mut [[f64; D]]),
     inv_diag: &[[f64; D]],

@@ -66,8 +66,8 @@ fn main() -> ExitCode {
     // The solver allocates and frees its per-step buffers every step; glibc's default then
     // gives the heap top back to the system and faults the pages in again each step (the 5 mm
     // dam break to 0.1 s: 23.8 k minor faults against 3.1 k, 10 % of its wall time;
-    // docs/performance.md).
-    // A 64 MiB top pad keeps them. Only where memory comes from changes, not a bit of a run.
+    // docs/performance.md). A 64 MiB top pad keeps them. Only where memory comes from
+    // changes, not a bit of a run.
     #[cfg(all(target_os = "linux", target_env = "gnu"))]
     // SAFETY: sets one allocator parameter before any worker thread exists.
     unsafe {
