@@ -170,6 +170,24 @@ pub fn check<S: SceneSection>(m: &Manifest<S>) -> Vec<Issue> {
             ),
         );
     }
+    if let Some(r) = p.viscous_laplacian_radius
+        && c.real(
+            "mps.viscous_laplacian_radius",
+            r,
+            between(1.0, false, 5.0, true),
+        )
+        && lap_ok
+        && r > p.laplacian_radius
+    {
+        c.fail(
+            "mps.viscous_laplacian_radius",
+            format!(
+                "must be <= mps.laplacian_radius ({}), got {}",
+                fmt_num(p.laplacian_radius),
+                fmt_num(r)
+            ),
+        );
+    }
     c.real(
         "mps.surface_threshold",
         p.surface_threshold,

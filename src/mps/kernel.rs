@@ -28,6 +28,13 @@ pub struct RefValues {
     pub radius_strain_m: f64,
     /// n0 with `radius_strain_m`.
     pub n0_strain: f64,
+    /// Effective radius of the viscous stage's Laplacian (m); `radius_lap_m` unless set by
+    /// [`RefValues::with_viscous_radius`].
+    pub radius_visc_m: f64,
+    /// n0 with `radius_visc_m`.
+    pub n0_visc: f64,
+    /// lambda with `radius_visc_m` (m^2).
+    pub lambda_visc_m2: f64,
 }
 
 impl RefValues {
@@ -65,6 +72,9 @@ impl RefValues {
             lambda_m2: wr2 / n0_lap,
             radius_strain_m: radius_n_m,
             n0_strain: n0,
+            radius_visc_m: radius_lap_m,
+            n0_visc: n0_lap,
+            lambda_visc_m2: wr2 / n0_lap,
         }
     }
 
@@ -78,6 +88,21 @@ impl RefValues {
         Self {
             radius_strain_m,
             n0_strain: lattice.n0,
+            ..self
+        }
+    }
+
+    /// The same values with the viscous stage's Laplacian over `radius_visc_m` (its n0 and
+    /// lambda from the same lattice sums as the pressure's).
+    pub fn with_viscous_radius<const D: usize>(self, spacing_m: f64, radius_visc_m: f64) -> Self {
+        if radius_visc_m == self.radius_lap_m {
+            return self;
+        }
+        let lattice = Self::on_lattice::<D>(spacing_m, self.radius_n_m, radius_visc_m);
+        Self {
+            radius_visc_m,
+            n0_visc: lattice.n0_lap,
+            lambda_visc_m2: lattice.lambda_m2,
             ..self
         }
     }

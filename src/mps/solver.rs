@@ -58,6 +58,8 @@ pub struct SolverConfig<const D: usize> {
     pub radius_lap_m: f64,
     /// Radius of the strain rate's velocity gradient (m); `radius_n_m` by default.
     pub radius_strain_m: f64,
+    /// Radius of the viscous stage's Laplacian (m); `radius_lap_m` by default.
+    pub radius_visc_m: f64,
     /// beta: a particle is on the free surface when n* < beta n0.
     pub surface_threshold: f64,
     /// gamma: relaxation of the number-density source term.
@@ -320,7 +322,8 @@ impl<const D: usize> Solver<D> {
     pub fn new(config: SolverConfig<D>, particles: Particles<D>) -> Self {
         let refs =
             RefValues::on_lattice::<D>(config.spacing_m, config.radius_n_m, config.radius_lap_m)
-                .with_strain_radius::<D>(config.spacing_m, config.radius_strain_m);
+                .with_strain_radius::<D>(config.spacing_m, config.radius_strain_m)
+                .with_viscous_radius::<D>(config.spacing_m, config.radius_visc_m);
         let inlet_sections = config
             .inlets
             .iter()

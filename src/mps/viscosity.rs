@@ -505,14 +505,21 @@ pub fn predict_velocity<const D: usize>(
     for (k, &i) in rows.iter().enumerate() {
         row_of[i] = k as u32;
     }
-    let coef = 2.0 * D as f64 / (refs.lambda_m2 * refs.n0_lap);
+    let coef = 2.0 * D as f64 / (refs.lambda_visc_m2 * refs.n0_visc);
     // Row i: (s_i + sum_j c_ij) u_i - sum_fluid c_ij u_j = s_i rhs_i + sum_walls c_ij u_j.
     // A mirror image carries its source's velocity with the plane's normal component
     // negated, so with symmetry planes each component has its own matrix: an image's column
     // enters with that sign (its plane bits ride in the column's top bits, see
     // `CsrMatrix::component_diagonal`), and i's own image, u_i' - u_i = (sign - 1) u_i, on
     // the diagonal only.
-    let nb = &pairs.lap;
+    // The viscous Laplacian's radius may be shorter than the pressure's
+    // (`mps.viscous_laplacian_radius`): then the near pairs hold all its neighbours.
+    let radius_visc_m = refs.radius_visc_m;
+    let nb = if radius_visc_m != refs.radius_lap_m && radius_visc_m <= refs.radius_n_m {
+        &pairs.near
+    } else {
+        &pairs.lap
+    };
     let (matrix, extra) = CsrMatrix::assemble(rows.len(), |k, columns, values| {
         let i = rows[k];
         let scale = if divergence_form {
@@ -528,14 +535,14 @@ pub fn predict_velocity<const D: usize>(
             p,
             nb,
             i,
-            refs.radius_lap_m,
+            radius_visc_m,
             settings.wall_surface_m,
             slip_walls,
         );
         for &e in nb.of(i) {
             let j = entry_index(e);
             let r = nb.displacement(&p.position_m, i, e);
-            let mut a = coef * weight(r.norm(), refs.radius_lap_m);
+            let mut a = coef * weight(r.norm(), radius_visc_m);
             if a == 0.0 {
                 continue;
             }

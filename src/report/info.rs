@@ -216,6 +216,7 @@ pub fn run_info(path: &Path, size_bytes: u64, run: &RunFile) -> RunInfo {
                 "wall_surface_no_slip",
                 "quadratic_strain_rate",
                 "strain_rate_radius",
+                "viscous_laplacian_radius",
                 "exact_projection",
                 "yield_penalty_pa_s",
                 "yield_max_iterations",

@@ -69,6 +69,11 @@ pub fn solver_config<const D: usize>(m: &Manifest, scene: &Scene<D>) -> SolverCo
             .strain_rate_radius
             .unwrap_or(m.mps.number_density_radius)
             * l0,
+        radius_visc_m: m
+            .mps
+            .viscous_laplacian_radius
+            .unwrap_or(m.mps.laplacian_radius)
+            * l0,
         surface_threshold: m.mps.surface_threshold,
         relaxation_coefficient: m.mps.relaxation_coefficient,
         multigrid_ppe: m.mps.ppe_preconditioner == PpePreconditioner::Multigrid,

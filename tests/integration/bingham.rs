@@ -20,6 +20,7 @@ fn bingham_poiseuille(
         stress_gradient_term,
         yield_solve,
         cells_per_half_width,
+        DEFAULT_RADII,
     );
     profile
 }
@@ -27,12 +28,31 @@ fn bingham_poiseuille(
 /// Heights, velocities and Pi of one column of particles.
 type Profile = (Vec<f64>, Vec<f64>, Vec<f64>);
 
-/// [`bingham_poiseuille`] with the CG iterations of every step summed.
+/// The Laplacian's radius in these tests, in units of spacing (the default).
+const LAPLACIAN_RADIUS: f64 = 3.1;
+
+/// The radii of the strain rate's stencil and of the viscous Laplacian, in units of spacing
+/// (`mps.strain_rate_radius`, `mps.viscous_laplacian_radius`).
+#[derive(Clone, Copy)]
+struct Radii {
+    strain: f64,
+    viscous: f64,
+}
+
+/// The defaults: the number density's radius and the Laplacian's.
+const DEFAULT_RADII: Radii = Radii {
+    strain: 2.1,
+    viscous: LAPLACIAN_RADIUS,
+};
+
+/// [`bingham_poiseuille`] with the CG iterations of every step summed, over the given
+/// stencils.
 fn bingham_poiseuille_counted(
     rheology: Rheology,
     stress_gradient_term: bool,
     yield_solve: Option<YieldSolve>,
     cells_per_half_width: i64,
+    radii: Radii,
 ) -> (Profile, u64) {
     let h = 0.1;
     let l0 = h / cells_per_half_width as f64;
@@ -59,7 +79,9 @@ fn bingham_poiseuille_counted(
             );
         }
     }
-    let refs = RefValues::on_lattice::<2>(l0, 2.1 * l0, 3.1 * l0);
+    let refs = RefValues::on_lattice::<2>(l0, 2.1 * l0, LAPLACIAN_RADIUS * l0)
+        .with_viscous_radius::<2>(l0, radii.viscous * l0)
+        .with_strain_radius::<2>(l0, radii.strain * l0);
     let nb = Neighbours::build_periodic_x(&p.position_m, refs.radius_lap_m, columns as f64 * l0);
     // Particles do not move in this test: one set of kernel pairs serves every step.
     let pairs = KernelPairs::new(&nb, &p.position_m, refs.radius_n_m, refs.radius_lap_m);
@@ -267,6 +289,24 @@ const POISEUILLE_SOLVE: YieldSolve = YieldSolve {
 /// with the nominal walls, with no regularisation error.
 #[test]
 fn yield_solve_gives_a_rigid_plug_and_the_closed_form() {
+    rigid_plug_and_closed_form(DEFAULT_RADII);
+}
+
+/// The same with the strain rate and the viscous Laplacian both over the first shell
+/// (`mps.strain_rate_radius` and `mps.viscous_laplacian_radius` 1.5; the Laplacian then has
+/// a third of the default's entries in 2D and a seventh in 3D). Measured: rigid exactly to
+/// 0.0400 m, plug velocity exact to 1e-6, worst 0.17 % (the first sheared row at the plug's
+/// velocity). With the strain rate at 2.1 over it the rigid edge moves in by a spacing
+/// (0.035 m): the two stencils then disagree on where the shear starts.
+#[test]
+fn yield_solve_with_a_first_shell_viscous_laplacian_gives_the_closed_form() {
+    rigid_plug_and_closed_form(Radii {
+        strain: 1.5,
+        viscous: 1.5,
+    });
+}
+
+fn rigid_plug_and_closed_form(radii: Radii) {
     let (h, g, tau, eta): (f64, f64, f64, f64) = (0.1, 2500.0, 100.0, 50.0);
     let cells = 20;
     let l0 = h / cells as f64;
@@ -275,7 +315,7 @@ fn yield_solve_gives_a_rigid_plug_and_the_closed_form() {
     // The critical rate only classifies: a rigid particle has Pi = 0 exactly.
     let rheology = Rheology::seed000(eta, tau, 1e-6);
     let solve = POISEUILLE_SOLVE;
-    let (y, u, pi) = bingham_poiseuille(rheology, false, Some(solve), cells);
+    let ((y, u, pi), _) = bingham_poiseuille_counted(rheology, false, Some(solve), cells, radii);
     let rigid_edge = y
         .iter()
         .zip(&pi)
@@ -521,9 +561,9 @@ fn inexact_velocity_steps_keep_the_yield_solve_profile() {
         ..exact_steps
     };
     let ((_, u_exact, pi_exact), cg_exact) =
-        bingham_poiseuille_counted(rheology, false, Some(exact_steps), cells);
+        bingham_poiseuille_counted(rheology, false, Some(exact_steps), cells, DEFAULT_RADII);
     let ((_, u_inexact, pi_inexact), cg_inexact) =
-        bingham_poiseuille_counted(rheology, false, Some(inexact_steps), cells);
+        bingham_poiseuille_counted(rheology, false, Some(inexact_steps), cells, DEFAULT_RADII);
     eprintln!("CG iterations: exact u steps {cg_exact}, inexact {cg_inexact}");
     let rigid = |pi: &[f64]| pi.iter().map(|pi| *pi == 0.0).collect::<Vec<_>>();
     assert_eq!(rigid(&pi_exact), rigid(&pi_inexact), "the plug changed");

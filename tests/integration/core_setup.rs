@@ -53,6 +53,7 @@ pub fn config<const D: usize>(
         radius_n_m: 2.1 * l0,
         radius_lap_m: 3.1 * l0,
         radius_strain_m: 2.1 * l0,
+        radius_visc_m: 3.1 * l0,
         surface_threshold: 0.97,
         relaxation_coefficient: 0.2,
         source_term: SourceTerm::Mixed,
