@@ -858,6 +858,28 @@ fn invalid_values_are_named_and_located() {
             .canonical
             .contains("strain_rate_radius")
     );
+    // The viscous Laplacian's own radius: the same bounds, null left out of the hash.
+    let e = err_with(MINIMAL, &["mps.viscous_laplacian_radius=1"]);
+    assert_invalid(&e, "mps.viscous_laplacian_radius", None, &["(1, 5]", "1"]);
+    let e = err_with(MINIMAL, &["mps.viscous_laplacian_radius=3.5"]);
+    assert_invalid(
+        &e,
+        "mps.viscous_laplacian_radius",
+        None,
+        &["mps.laplacian_radius (3.1)", "3.5"],
+    );
+    let viscous = ok_with(MINIMAL, &["mps.viscous_laplacian_radius=1.5"]);
+    assert_ne!(ok_with(MINIMAL, &[]).hash_hex, viscous.hash_hex);
+    assert!(
+        viscous
+            .canonical
+            .contains(r#""viscous_laplacian_radius":1.5"#)
+    );
+    assert!(
+        !ok_with(MINIMAL, &[])
+            .canonical
+            .contains("viscous_laplacian_radius")
+    );
     // The adaptive penalty's switch, off, is no part of the experiment either.
     assert_eq!(
         ok_with(MINIMAL, &["mps.yield_penalty_adaptive=false"]).hash_hex,
