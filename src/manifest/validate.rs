@@ -156,37 +156,24 @@ pub fn check<S: SceneSection>(m: &Manifest<S>) -> Vec<Issue> {
         );
     }
     // The neighbour lists reach the Laplacian's radius (>= the number density's).
-    if let Some(r) = p.strain_rate_radius
-        && c.real("mps.strain_rate_radius", r, between(1.0, false, 5.0, true))
-        && lap_ok
-        && r > p.laplacian_radius
-    {
-        c.fail(
-            "mps.strain_rate_radius",
-            format!(
-                "must be <= mps.laplacian_radius ({}), got {}",
-                fmt_num(p.laplacian_radius),
-                fmt_num(r)
-            ),
-        );
-    }
-    if let Some(r) = p.viscous_laplacian_radius
-        && c.real(
-            "mps.viscous_laplacian_radius",
-            r,
-            between(1.0, false, 5.0, true),
-        )
-        && lap_ok
-        && r > p.laplacian_radius
-    {
-        c.fail(
-            "mps.viscous_laplacian_radius",
-            format!(
-                "must be <= mps.laplacian_radius ({}), got {}",
-                fmt_num(p.laplacian_radius),
-                fmt_num(r)
-            ),
-        );
+    for (field, radius) in [
+        ("mps.strain_rate_radius", p.strain_rate_radius),
+        ("mps.viscous_laplacian_radius", p.viscous_laplacian_radius),
+    ] {
+        if let Some(r) = radius
+            && c.real(field, r, between(1.0, false, 5.0, true))
+            && lap_ok
+            && r > p.laplacian_radius
+        {
+            c.fail(
+                field,
+                format!(
+                    "must be <= mps.laplacian_radius ({}), got {}",
+                    fmt_num(p.laplacian_radius),
+                    fmt_num(r)
+                ),
+            );
+        }
     }
     c.real(
         "mps.surface_threshold",

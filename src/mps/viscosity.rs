@@ -531,14 +531,7 @@ pub fn predict_velocity<const D: usize>(
         let mut boundary = Vector::<D>::zeros();
         let mut own_image = Vector::<D>::zeros();
         let slip_walls = &settings.slip_walls;
-        let frames = Frames::of(
-            p,
-            nb,
-            i,
-            radius_visc_m,
-            settings.wall_surface_m,
-            slip_walls,
-        );
+        let frames = Frames::of(p, nb, i, radius_visc_m, settings.wall_surface_m, slip_walls);
         for &e in nb.of(i) {
             let j = entry_index(e);
             let r = nb.displacement(&p.position_m, i, e);

@@ -839,47 +839,19 @@ fn invalid_values_are_named_and_located() {
         ],
     );
     assert_invalid(&e, "mps.quadratic_strain_rate", None, &["set one of them"]);
-    // The strain rate's radius: beyond the nearest neighbours, within the neighbour lists;
-    // unset, it is no part of the experiment.
-    let e = err_with(MINIMAL, &["mps.strain_rate_radius=1"]);
-    assert_invalid(&e, "mps.strain_rate_radius", None, &["(1, 5]", "1"]);
-    let e = err_with(MINIMAL, &["mps.strain_rate_radius=3.5"]);
-    assert_invalid(
-        &e,
-        "mps.strain_rate_radius",
-        None,
-        &["mps.laplacian_radius (3.1)", "3.5"],
-    );
-    let shell = ok_with(MINIMAL, &["mps.strain_rate_radius=1.5"]);
-    assert_ne!(ok_with(MINIMAL, &[]).hash_hex, shell.hash_hex);
-    assert!(shell.canonical.contains(r#""strain_rate_radius":1.5"#));
-    assert!(
-        !ok_with(MINIMAL, &[])
-            .canonical
-            .contains("strain_rate_radius")
-    );
-    // The viscous Laplacian's own radius: the same bounds, null left out of the hash.
-    let e = err_with(MINIMAL, &["mps.viscous_laplacian_radius=1"]);
-    assert_invalid(&e, "mps.viscous_laplacian_radius", None, &["(1, 5]", "1"]);
-    let e = err_with(MINIMAL, &["mps.viscous_laplacian_radius=3.5"]);
-    assert_invalid(
-        &e,
-        "mps.viscous_laplacian_radius",
-        None,
-        &["mps.laplacian_radius (3.1)", "3.5"],
-    );
-    let viscous = ok_with(MINIMAL, &["mps.viscous_laplacian_radius=1.5"]);
-    assert_ne!(ok_with(MINIMAL, &[]).hash_hex, viscous.hash_hex);
-    assert!(
-        viscous
-            .canonical
-            .contains(r#""viscous_laplacian_radius":1.5"#)
-    );
-    assert!(
-        !ok_with(MINIMAL, &[])
-            .canonical
-            .contains("viscous_laplacian_radius")
-    );
+    // The strain rate's and the viscous Laplacian's radii: beyond the nearest neighbours,
+    // within the neighbour lists; unset, no part of the experiment.
+    for key in ["strain_rate_radius", "viscous_laplacian_radius"] {
+        let field = format!("mps.{key}");
+        let e = err_with(MINIMAL, &[&format!("{field}=1")]);
+        assert_invalid(&e, &field, None, &["(1, 5]", "1"]);
+        let e = err_with(MINIMAL, &[&format!("{field}=3.5")]);
+        assert_invalid(&e, &field, None, &["mps.laplacian_radius (3.1)", "3.5"]);
+        let shell = ok_with(MINIMAL, &[&format!("{field}=1.5")]);
+        assert_ne!(ok_with(MINIMAL, &[]).hash_hex, shell.hash_hex);
+        assert!(shell.canonical.contains(&format!(r#""{key}":1.5"#)));
+        assert!(!ok_with(MINIMAL, &[]).canonical.contains(key));
+    }
     // The adaptive penalty's switch, off, is no part of the experiment either.
     assert_eq!(
         ok_with(MINIMAL, &["mps.yield_penalty_adaptive=false"]).hash_hex,
