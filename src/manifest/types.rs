@@ -287,7 +287,9 @@ pub struct Mps {
     pub strain_rate_radius: Option<f64>,
     /// Radius of the viscous stage's Laplacian, in units of spacing (null: `laplacian_radius`,
     /// which the pressure keeps). The viscous solve's matrix has one entry per neighbour in
-    /// it: a 3D row holds about 125 at 3.1 and 32 at 2.1. In (1, `laplacian_radius`].
+    /// it: a 3D row holds about 125 at 3.1, 32 at 2.1 and 18 at 1.5. Under the yield solve
+    /// set it with `strain_rate_radius`: the two stencils must agree on where the shear
+    /// starts (`tests/integration/bingham.rs`). In (1, `laplacian_radius`].
     #[serde(default)]
     pub viscous_laplacian_radius: Option<f64>,
     /// Incremental scheme: the increment's equation built from the very divergence and
