@@ -13,11 +13,11 @@
 //! scheme), `mps.pressure_floor_pa` at 0, `mps.yield_penalty_pa_s` at 0 (with
 //! `mps.yield_max_iterations` and `mps.yield_tolerance_1_s`), `mps.yield_velocity_fraction` at
 //! 0, `mps.corrected_strain_rate`, `mps.wall_surface_no_slip`, `mps.quadratic_strain_rate`
-//! and `mps.exact_projection` (also under the standard scheme) false, `stop.rest_*` without `stop.rest_metric`, null
-//! `mps.wall_collision_*`, `mps.strain_rate_radius`, `mps.viscous_laplacian_radius`, `time.dt_min_s`,
-//! `stop.max_ghost_particles` and the rod's, the cone's and the bodies' slip lengths, an empty
-//! `boundaries` section), so every experiment keeps the hash it had before they existed and
-//! files written then still verify. JSON is YAML, so the canonical text loads back through
+//! and `mps.exact_projection` (also under the standard scheme) false, `stop.rest_*` without
+//! `stop.rest_metric`, null `mps.wall_collision_*`, `mps.strain_rate_radius`,
+//! `mps.viscous_laplacian_radius`, `time.dt_min_s`, `stop.max_ghost_particles` and the rod's,
+//! the cone's and the bodies' slip lengths, an empty `boundaries` section), so every
+//! experiment keeps the hash it had before they existed and files written then still verify. JSON is YAML, so the canonical text loads back through
 //! [`super::from_str`] to the same manifest and hash.
 
 use serde_json::Value;

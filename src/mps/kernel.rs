@@ -40,30 +40,8 @@ pub struct RefValues {
 impl RefValues {
     /// Sums over the lattice points j != 0 of a D-dimensional square/cubic lattice.
     pub fn on_lattice<const D: usize>(spacing_m: f64, radius_n_m: f64, radius_lap_m: f64) -> Self {
-        let reach = (radius_n_m.max(radius_lap_m) / spacing_m).ceil() as i64 + 1;
-        let side = (2 * reach + 1) as usize;
-        let mut n0 = 0.0;
-        let mut n0_lap = 0.0;
-        let mut wr2 = 0.0;
-        // Walk the lattice in a fixed order so the sums (and their rounding) never change.
-        for flat in 0..side.pow(D as u32) {
-            let mut rest = flat;
-            let mut r2 = 0.0;
-            for _ in 0..D {
-                let k = (rest % side) as i64 - reach;
-                rest /= side;
-                let x = k as f64 * spacing_m;
-                r2 += x * x;
-            }
-            if r2 == 0.0 {
-                continue;
-            }
-            let r = r2.sqrt();
-            n0 += weight(r, radius_n_m);
-            let w = weight(r, radius_lap_m);
-            n0_lap += w;
-            wr2 += w * r2;
-        }
+        let (n0, _) = lattice_sums::<D>(spacing_m, radius_n_m);
+        let (n0_lap, wr2) = lattice_sums::<D>(spacing_m, radius_lap_m);
         RefValues {
             radius_n_m,
             radius_lap_m,
@@ -84,10 +62,10 @@ impl RefValues {
         if radius_strain_m == self.radius_n_m {
             return self;
         }
-        let lattice = Self::on_lattice::<D>(spacing_m, radius_strain_m, self.radius_lap_m);
+        let (n0_strain, _) = lattice_sums::<D>(spacing_m, radius_strain_m);
         Self {
             radius_strain_m,
-            n0_strain: lattice.n0,
+            n0_strain,
             ..self
         }
     }
@@ -98,12 +76,39 @@ impl RefValues {
         if radius_visc_m == self.radius_lap_m {
             return self;
         }
-        let lattice = Self::on_lattice::<D>(spacing_m, self.radius_n_m, radius_visc_m);
+        let (n0_visc, wr2) = lattice_sums::<D>(spacing_m, radius_visc_m);
         Self {
             radius_visc_m,
-            n0_visc: lattice.n0_lap,
-            lambda_visc_m2: lattice.lambda_m2,
+            n0_visc,
+            lambda_visc_m2: wr2 / n0_visc,
             ..self
         }
     }
+}
+
+/// (sum w, sum w r^2) of the weight over `radius_m` at the lattice points j != 0. The points
+/// are walked in lexicographic order of their coordinates, the same for any reach, and the
+/// points beyond the radius add exact zeros: the sums (and their rounding) never change.
+fn lattice_sums<const D: usize>(spacing_m: f64, radius_m: f64) -> (f64, f64) {
+    let reach = (radius_m / spacing_m).ceil() as i64 + 1;
+    let side = (2 * reach + 1) as usize;
+    let mut n0 = 0.0;
+    let mut wr2 = 0.0;
+    for flat in 0..side.pow(D as u32) {
+        let mut rest = flat;
+        let mut r2 = 0.0;
+        for _ in 0..D {
+            let k = (rest % side) as i64 - reach;
+            rest /= side;
+            let x = k as f64 * spacing_m;
+            r2 += x * x;
+        }
+        if r2 == 0.0 {
+            continue;
+        }
+        let w = weight(r2.sqrt(), radius_m);
+        n0 += w;
+        wr2 += w * r2;
+    }
+    (n0, wr2)
 }
