@@ -272,6 +272,12 @@ pub struct Mps {
     /// Fox & Zhu 1997). Without it a sheared layer slips by half a spacing at the floor.
     #[serde(default)]
     pub wall_surface_no_slip: bool,
+    /// With `wall_surface_no_slip`: each wall particle's own face (its outward normal from
+    /// the wall particles around it) for the extrapolation, instead of one plane fitted to all
+    /// of a fluid particle's wall neighbours, which misplaces the surface near an edge (a
+    /// floor under a side wall) by up to a spacing. Experimental, off by default.
+    #[serde(default)]
+    pub wall_face_normals: bool,
     /// The strain rate's velocity gradient from a weighted least-squares fit of a quadratic
     /// velocity field over the neighbours (exact for a parabolic profile: a sheared zone one
     /// or two spacings thick), instead of the gradient model. Not with
@@ -407,6 +413,7 @@ impl Default for Mps {
             particle_shifting_limit: default_particle_shifting_limit(),
             corrected_strain_rate: false,
             wall_surface_no_slip: false,
+            wall_face_normals: false,
             quadratic_strain_rate: false,
             strain_rate_radius: None,
             viscous_laplacian_radius: None,

@@ -312,6 +312,12 @@ pub fn check<S: SceneSection>(m: &Manifest<S>) -> Vec<Issue> {
             );
         }
     }
+    if p.wall_face_normals && !p.wall_surface_no_slip {
+        c.fail(
+            "mps.wall_face_normals",
+            "needs mps.wall_surface_no_slip: true (it places that no-slip surface)".to_string(),
+        );
+    }
     if p.yield_penalty_adaptive && p.yield_penalty_pa_s == 0.0 {
         c.fail(
             "mps.yield_penalty_adaptive",

@@ -18,7 +18,10 @@ use super::pressure::SolveReport;
 use super::reduce::PARTICLES_PER_TASK;
 use super::reduce::max_by;
 use super::rheology::Rheology;
-use super::viscosity::{Loads, SlipWall, StrainRateGradient, ViscousSettings, predict_velocity};
+use super::viscosity::{
+    FACE_RADIUS_SPACINGS, Loads, SlipWall, StrainRateGradient, ViscousSettings, WallFaces,
+    predict_velocity,
+};
 use super::yield_solve::{Tensor, YieldSolve};
 use rayon::prelude::*;
 use std::time::Instant;
@@ -99,6 +102,9 @@ pub struct SolverConfig<const D: usize> {
     /// No-slip at the walls' surface, not at the wall particles (see
     /// [`crate::mps::viscosity::ViscousSettings::wall_surface_m`]).
     pub wall_surface_no_slip: bool,
+    /// With `wall_surface_no_slip`, each wall particle's own face for the extrapolation
+    /// ([`crate::mps::viscosity::WallFaces`]) instead of one plane fitted per fluid particle.
+    pub wall_face_normals: bool,
     /// Incremental scheme: the increment's equation is -D G with the correction's own
     /// divergence and gradient (exact projection, `solver/exact.rs`) instead of the MPS
     /// Laplacian model.
@@ -454,6 +460,15 @@ impl<const D: usize> Solver<D> {
         let incremental = self.config.pressure_scheme == PressureScheme::Incremental;
         let pressure_accel = incremental.then(|| self.carried_pressure_acceleration());
         let viscosity_started = Instant::now();
+        let faces =
+            (self.config.wall_surface_no_slip && self.config.wall_face_normals).then(|| {
+                WallFaces::build(
+                    &self.particles,
+                    &self.neighbours,
+                    FACE_RADIUS_SPACINGS * self.config.spacing_m,
+                    0.5 * self.config.spacing_m,
+                )
+            });
         let stage = predict_velocity(
             &self.particles,
             &self.pairs,
@@ -464,6 +479,7 @@ impl<const D: usize> Solver<D> {
                 pressure_accel_m_s2: pressure_accel.as_deref(),
                 yield_stress_pa: &self.yield_stress_pa,
                 yield_penalty_pa_s: self.yield_penalty_pa_s,
+                wall_faces: faces.as_ref(),
             },
             dt_s,
         );

@@ -62,12 +62,14 @@ fn slip_wall_of(slip_walls: &[SlipWall], j: usize) -> Option<&SlipWall> {
 /// The walls a fluid particle's pair terms see: the no-slip frame (`wall_surface_m`) of the
 /// walls that do not slip, and the frame of the slip walls.
 #[derive(Debug, Clone, Copy)]
-pub(crate) struct Frames<const D: usize> {
+pub(crate) struct Frames<'a, const D: usize> {
     no_slip: Option<WallFrame<D>>,
     slip: Option<WallFrame<D>>,
+    // Each wall particle's own face for the no-slip walls (`mps.wall_face_normals`).
+    faces: Option<&'a WallFaces<D>>,
 }
 
-impl<const D: usize> Frames<D> {
+impl<'a, const D: usize> Frames<'a, D> {
     pub(crate) fn of(
         p: &Particles<D>,
         nb: &Neighbours,
@@ -75,6 +77,7 @@ impl<const D: usize> Frames<D> {
         radius_m: f64,
         wall_surface_m: Option<f64>,
         slip_walls: &[SlipWall],
+        faces: Option<&'a WallFaces<D>>,
     ) -> Self {
         let plain = |j: usize| slip_wall_of(slip_walls, j).is_none();
         let no_slip = wall_surface_m.and_then(|s| WallFrame::of(p, nb, i, radius_m, s, plain));
@@ -83,21 +86,156 @@ impl<const D: usize> Frames<D> {
                 slip_wall_of(slip_walls, j).is_some()
             })
         });
-        Self { no_slip, slip }
+        Self {
+            no_slip,
+            slip,
+            faces: faces.filter(|_| wall_surface_m.is_some()),
+        }
     }
 
-    /// The factor of wall or dummy neighbour j's pair term (u_j - u_i) at displacement r_ij
-    /// (1 for a wall that carries its own velocity).
+    /// The factor of wall or dummy neighbour entry `e`'s pair term (u_j - u_i) at
+    /// displacement r_ij (1 for a wall that carries its own velocity).
     #[inline]
-    pub(crate) fn factor(&self, slip_walls: &[SlipWall], j: usize, r_ij: &Vector<D>) -> f64 {
+    pub(crate) fn factor(&self, slip_walls: &[SlipWall], e: u32, r_ij: &Vector<D>) -> f64 {
+        let j = entry_index(e);
         if let Some(wall) = slip_wall_of(slip_walls, j)
             && let Some(f) = &self.slip
         {
             return f.factor(r_ij) * f.gap_m / (f.gap_m + wall.slip_length_m);
         }
+        if let Some(f) = self.faces.and_then(|faces| faces.factor_of(e, r_ij)) {
+            return f;
+        }
         self.no_slip.as_ref().map_or(1.0, |f| f.factor(r_ij))
     }
 }
+
+/// Each wall or dummy particle's own face, for the no-slip extrapolation of [`WallFrame`]
+/// pair by pair: [`WallFrame`] fits one plane to all of a fluid particle's wall neighbours,
+/// which near an edge (a floor under a side wall) tilts it between the two faces and puts
+/// the surface a quarter spacing away, so that a pair term within two or three spacings of
+/// the edge came out up to six times its value (3D, Laplacian radius 3.1). Here a wall
+/// particle's outward normal is the direction away from the non-fluid particles around it
+/// (a first-layer particle of a flat wall: the wall's normal; of an edge: the diagonal), its
+/// face `surface_m` in front of it; a dummy, or an edge's wall particle solid on all sides,
+/// takes the face of its nearest wall particle that has one.
+/// Then d_i is i's own distance to the face of each wall neighbour.
+#[derive(Debug, Clone, PartialEq)]
+pub struct WallFaces<const D: usize> {
+    // Outward unit normal per particle (zero: none, the fitted frame is used).
+    normal: Vec<Vector<D>>,
+    // Depth of the particle behind its face, in metres.
+    depth_m: Vec<f64>,
+    // d_i is kept at least this (as `WallFrame`'s gap).
+    min_gap_m: f64,
+}
+
+impl<const D: usize> WallFaces<D> {
+    /// Faces from `nb`, which must list the wall particles' neighbours (the solver's lists
+    /// do), over `radius_m`; `surface_m` in front of the first layer.
+    pub fn build(p: &Particles<D>, nb: &Neighbours, radius_m: f64, surface_m: f64) -> Self {
+        let solid = |j: usize| matches!(p.kind[j], ParticleKind::Wall | ParticleKind::Dummy);
+        // Only walls with fluid in reach are read (most of a form's walls are not).
+        let wet = |i: usize| {
+            p.kind[i] == ParticleKind::Wall
+                && nb
+                    .of(i)
+                    .iter()
+                    .any(|&e| p.kind[entry_index(e)] == ParticleKind::Fluid)
+        };
+        let normal: Vec<Vector<D>> = (0..p.len())
+            .into_par_iter()
+            .with_min_len(PARTICLES_PER_TASK)
+            .map(|i| {
+                if !wet(i) {
+                    return Vector::<D>::zeros();
+                }
+                let mut away = Vector::<D>::zeros();
+                let mut total = 0.0;
+                for &e in nb.of(i) {
+                    let j = entry_index(e);
+                    if !solid(j) || Neighbours::is_own_image(e, i) {
+                        continue;
+                    }
+                    let r = nb.displacement(&p.position_m, i, e);
+                    let w = weight(r.norm(), radius_m);
+                    away -= r * w;
+                    total += w * r.norm();
+                }
+                // Solid on all sides (or a shell one particle thick): no face.
+                if away.norm() < FACE_ASYMMETRY * total {
+                    Vector::<D>::zeros()
+                } else {
+                    away / away.norm()
+                }
+            })
+            .collect();
+        let mut depth_m: Vec<f64> = (0..p.len())
+            .map(|i| {
+                if normal[i] != Vector::<D>::zeros() {
+                    surface_m
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        let mut normal = normal;
+        // A dummy, or a wall particle without a face (a concave edge's), takes the face of
+        // its nearest wall particle that has one (ties: the lowest index).
+        let mut nearest: Vec<(f64, usize)> = vec![(f64::INFINITY, usize::MAX); p.len()];
+        for i in 0..p.len() {
+            if depth_m[i] == 0.0 || p.kind[i] != ParticleKind::Wall {
+                continue;
+            }
+            for &e in nb.of(i) {
+                let j = entry_index(e);
+                if !solid(j) || depth_m[j] != 0.0 || Neighbours::plane_bits(e) != 0 {
+                    continue;
+                }
+                let d = nb.displacement(&p.position_m, i, e).norm();
+                if d < nearest[j].0 {
+                    nearest[j] = (d, i);
+                }
+            }
+        }
+        for (j, &(_, i)) in nearest.iter().enumerate() {
+            if i != usize::MAX {
+                normal[j] = normal[i];
+                depth_m[j] = (p.position_m[i] - p.position_m[j]).dot(&normal[i]) + surface_m;
+            }
+        }
+        Self {
+            normal,
+            depth_m,
+            min_gap_m: 0.5 * surface_m,
+        }
+    }
+
+    /// 1 + d_j/d_i for wall or dummy entry `e` at displacement r_ij from fluid particle i, with
+    /// d_i i's distance to j's face; `None` where j has no face.
+    #[inline]
+    pub fn factor_of(&self, e: u32, r_ij: &Vector<D>) -> Option<f64> {
+        let j = entry_index(e);
+        let n = self.normal.get(j)?;
+        if *n == Vector::<D>::zeros() {
+            return None;
+        }
+        let n = Neighbours::reflected(e, *n);
+        let gap_m = ((-r_ij).dot(&n) - self.depth_m[j]).max(self.min_gap_m);
+        Some(1.0 + self.depth_m[j] / gap_m)
+    }
+}
+
+/// The radius over which a wall particle's normal is taken, in spacings: its face-adjacent
+/// lattice neighbours only. Walls are built on the lattice, so this is exact on a flat face
+/// and on the rows next to an edge, where a wider radius (1.5, 2.1) takes in the other
+/// face's particles and tilts the normal (factors off by up to 19 and 39 % there).
+pub const FACE_RADIUS_SPACINGS: f64 = 1.1;
+
+/// A wall particle has a face when the weighted pull of its solid neighbours is at least
+/// this share of its largest possible value (a first-layer particle of a flat wall: one of
+/// its five face-adjacent solid neighbours in 3D uncancelled, 0.2).
+const FACE_ASYMMETRY: f64 = 0.1;
 
 /// The velocity gradient model of the strain rate.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -207,6 +345,7 @@ pub struct ViscousStage<const D: usize> {
 ///   rate); the uncorrected d/n0 where M_i is ill-conditioned (a splash).
 /// - `Quadratic`: see [`quadratic_gradient`]; the corrected model where the fit is
 ///   ill-conditioned.
+#[allow(clippy::too_many_arguments)]
 pub fn velocity_gradient<const D: usize>(
     p: &Particles<D>,
     nb: &Neighbours,
@@ -215,8 +354,17 @@ pub fn velocity_gradient<const D: usize>(
     model: StrainRateGradient,
     wall_surface_m: Option<f64>,
     slip_walls: &[SlipWall],
+    faces: Option<&WallFaces<D>>,
 ) -> SMatrix<f64, D, D> {
-    let frames = Frames::of(p, nb, i, refs.radius_strain_m, wall_surface_m, slip_walls);
+    let frames = Frames::of(
+        p,
+        nb,
+        i,
+        refs.radius_strain_m,
+        wall_surface_m,
+        slip_walls,
+        faces,
+    );
     if model == StrainRateGradient::Quadratic
         && let Some(g) = quadratic_gradient(p, nb, refs, i, &frames, slip_walls)
     {
@@ -231,7 +379,7 @@ pub fn velocity_gradient<const D: usize>(
         let du = if p.kind[j] == ParticleKind::Fluid {
             nb.reflect(e, p.velocity_m_s[j]) - ui
         } else {
-            (nb.reflect(e, p.velocity_m_s[j]) - ui) * frames.factor(slip_walls, j, &r)
+            (nb.reflect(e, p.velocity_m_s[j]) - ui) * frames.factor(slip_walls, e, &r)
         };
         g += du * (r.transpose() * (w / r2));
         if corrected {
@@ -262,7 +410,7 @@ fn quadratic_gradient<const D: usize>(
     nb: &Neighbours,
     refs: &RefValues,
     i: usize,
-    frames: &Frames<D>,
+    frames: &Frames<'_, D>,
     slip_walls: &[SlipWall],
 ) -> Option<SMatrix<f64, D, D>> {
     let frame = frames.no_slip.as_ref();
@@ -311,7 +459,7 @@ fn quadratic_gradient<const D: usize>(
             heaviest = heaviest.max(w);
             add(
                 &r,
-                &((nb.reflect(e, p.velocity_m_s[j]) - ui) * frames.factor(slip_walls, j, &r)),
+                &((nb.reflect(e, p.velocity_m_s[j]) - ui) * frames.factor(slip_walls, e, &r)),
                 w,
             );
             continue;
@@ -377,6 +525,9 @@ pub struct Loads<'a, const D: usize> {
     /// The yield solve's adaptive penalty from the last step (0: none yet, start from the
     /// settings' penalty).
     pub yield_penalty_pa_s: f64,
+    /// Each wall particle's own face for the no-slip extrapolation (`None`: one frame fitted
+    /// per fluid particle, [`WallFrame`]).
+    pub wall_faces: Option<&'a WallFaces<D>>,
 }
 
 impl<const D: usize> Loads<'_, D> {
@@ -387,6 +538,7 @@ impl<const D: usize> Loads<'_, D> {
             pressure_accel_m_s2: None,
             yield_stress_pa: &[],
             yield_penalty_pa_s: 0.0,
+            wall_faces: None,
         }
     }
 }
@@ -420,6 +572,7 @@ pub fn predict_velocity<const D: usize>(
         pressure_accel_m_s2,
         yield_stress_pa: carried_stress_pa,
         yield_penalty_pa_s: carried_penalty_pa_s,
+        wall_faces,
     } = loads;
     let rho = settings.density_kg_m3;
     let n = p.len();
@@ -453,6 +606,7 @@ pub fn predict_velocity<const D: usize>(
                     settings.gradient,
                     settings.wall_surface_m,
                     &settings.slip_walls,
+                    wall_faces,
                 ))
             } else {
                 0.0
@@ -531,7 +685,15 @@ pub fn predict_velocity<const D: usize>(
         let mut boundary = Vector::<D>::zeros();
         let mut own_image = Vector::<D>::zeros();
         let slip_walls = &settings.slip_walls;
-        let frames = Frames::of(p, nb, i, radius_visc_m, settings.wall_surface_m, slip_walls);
+        let frames = Frames::of(
+            p,
+            nb,
+            i,
+            radius_visc_m,
+            settings.wall_surface_m,
+            slip_walls,
+            wall_faces,
+        );
         for &e in nb.of(i) {
             let j = entry_index(e);
             let r = nb.displacement(&p.position_m, i, e);
@@ -540,7 +702,7 @@ pub fn predict_velocity<const D: usize>(
                 continue;
             }
             if !is_fluid(j) {
-                a *= frames.factor(slip_walls, j, &r);
+                a *= frames.factor(slip_walls, e, &r);
             }
             let c = if divergence_form {
                 let mu_ij = if is_fluid(j) {
@@ -597,6 +759,7 @@ pub fn predict_velocity<const D: usize>(
             &row_of,
             settings.wall_surface_m,
             &settings.slip_walls,
+            wall_faces,
         );
         let carried = rows
             .iter()

@@ -104,6 +104,7 @@ pub fn solver_config<const D: usize>(m: &Manifest, scene: &Scene<D>) -> SolverCo
             StrainRateGradient::Plain
         },
         wall_surface_no_slip: m.mps.wall_surface_no_slip,
+        wall_face_normals: m.mps.wall_face_normals,
         exact_projection: m.mps.exact_projection,
         compressibility_1_pa: m.mps.compressibility_1_pa,
         collision_distance_m: m.mps.collision_distance * l0,

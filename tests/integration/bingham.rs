@@ -112,6 +112,7 @@ fn bingham_poiseuille_counted(
                 pressure_accel_m_s2: None,
                 yield_stress_pa: &stress,
                 yield_penalty_pa_s: 0.0,
+                wall_faces: None,
             },
             dt_s,
         );

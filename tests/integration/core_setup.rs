@@ -71,6 +71,7 @@ pub fn config<const D: usize>(
         particle_shifting_limit_m: 0.05 * l0,
         strain_rate_gradient: mps_runner::mps::viscosity::StrainRateGradient::Plain,
         wall_surface_no_slip: false,
+        wall_face_normals: false,
         exact_projection: false,
         compressibility_1_pa: 0.45e-9,
         collision_distance_m: 0.5 * l0,

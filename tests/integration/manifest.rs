@@ -782,6 +782,7 @@ fn invalid_values_are_named_and_located() {
             "mps.surface_depth=0",
             "mps.corrected_strain_rate=false",
             "mps.wall_surface_no_slip=false",
+            "mps.wall_face_normals=false",
             "mps.quadratic_strain_rate=false",
             "mps.exact_projection=false",
             "mps.particle_shifting=0",
@@ -801,6 +802,18 @@ fn invalid_values_are_named_and_located() {
         let on = ok_with(MINIMAL, &["mps.pressure_scheme=incremental", on]);
         assert_ne!(plain.hash_hex, on.hash_hex);
     }
+    // Each wall particle's own face is part of the experiment, and places the surface's no-slip.
+    let surface = ["mps.wall_surface_no_slip=true"];
+    let faces = [
+        "mps.wall_surface_no_slip=true",
+        "mps.wall_face_normals=true",
+    ];
+    assert_ne!(
+        ok_with(MINIMAL, &surface).hash_hex,
+        ok_with(MINIMAL, &faces).hash_hex
+    );
+    let e = err_with(MINIMAL, &["mps.wall_face_normals=true"]);
+    assert_invalid(&e, "mps.wall_face_normals", None, &["wall_surface_no_slip"]);
     let e = err_with(MINIMAL, &["mps.surface_depth=1.5"]);
     assert_invalid(&e, "mps.surface_depth", None, &["[0, 1]", "1.5"]);
     let e = err_with(MINIMAL, &["mps.pressure_floor_pa=-2e5"]);

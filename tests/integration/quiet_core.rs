@@ -367,9 +367,26 @@ fn corrected_velocity_gradient_is_exact_up_to_the_free_surface() {
         .collect();
     assert!(top.len() >= 4);
     for &i in &top {
-        let corrected =
-            velocity_gradient(&p, &nb, &refs, i, StrainRateGradient::Corrected, None, &[]);
-        let plain = velocity_gradient(&p, &nb, &refs, i, StrainRateGradient::Plain, None, &[]);
+        let corrected = velocity_gradient(
+            &p,
+            &nb,
+            &refs,
+            i,
+            StrainRateGradient::Corrected,
+            None,
+            &[],
+            None,
+        );
+        let plain = velocity_gradient(
+            &p,
+            &nb,
+            &refs,
+            i,
+            StrainRateGradient::Plain,
+            None,
+            &[],
+            None,
+        );
         assert!(
             (corrected[(0, 1)] - shear).abs() < 1e-9 * shear && corrected[(1, 0)].abs() < 1e-9,
             "corrected du/dy {} at the surface, expected {shear}",
@@ -426,6 +443,87 @@ fn floor_lattice(l0: f64, columns: usize, rows: i32) -> mps_runner::mps::Particl
     p
 }
 
+/// Each wall particle's own face (`mps.wall_face_normals`): a 3D floor (surface z = 0) under
+/// a side wall (surface y = 0), both a wall layer and two dummy layers deep, as the scenes
+/// build them on the lattice. For every fluid particle within 3 spacings of a face and
+/// every wall or dummy neighbour of one face, the pair's factor is 1 + d_j/d_i with d_i the
+/// particle's distance to that face and d_j the neighbour's depth behind it: the linear
+/// profile through the particle and the face. The one plane that `WallFrame` fits to all the
+/// walls in reach tilts between the faces here (its factors are up to six times these; docs/
+/// validation.md). Away from the edge both are the same plane.
+#[test]
+fn wall_face_normals_extrapolate_through_each_face_at_an_edge() {
+    use mps_runner::mps::grid::entry_index;
+    use mps_runner::mps::viscosity::{FACE_RADIUS_SPACINGS, WallFaces, WallFrame};
+    let l0 = 0.01;
+    let radius = 3.1 * l0;
+    let mut p = mps_runner::mps::Particles::<3>::default();
+    // Side wall at y < 0 (rows -1, -2, -3), floor at z < 0; the edge block belongs to both.
+    for ix in 0..20 {
+        for iy in -3i32..12 {
+            for iz in -3i32..12 {
+                let x = Vector::<3>::new(
+                    f64::from(ix) * l0,
+                    (f64::from(iy) + 0.5) * l0,
+                    (f64::from(iz) + 0.5) * l0,
+                );
+                let kind = match (iy, iz) {
+                    (y, z) if y >= 0 && z >= 0 => ParticleKind::Fluid,
+                    (y, z) if (y == -1 && z >= -1) || (z == -1 && y >= -1) => ParticleKind::Wall,
+                    _ => ParticleKind::Dummy,
+                };
+                p.push(x, kind);
+            }
+        }
+    }
+    let nb = Neighbours::build(&p.position_m, radius);
+    let faces = WallFaces::build(&p, &nb, FACE_RADIUS_SPACINGS * l0, 0.5 * l0);
+    let (mut pairs, mut flat) = (0, 0);
+    for i in 0..p.len() {
+        let x = p.position_m[i];
+        // Clear of the lattice's own ends, where the walls stop.
+        let interior = x[0] > 4.0 * l0 && x[0] < 15.0 * l0 && x[1].max(x[2]) < 6.0 * l0;
+        if p.kind[i] != ParticleKind::Fluid || !interior || x[1].min(x[2]) > 3.0 * l0 {
+            continue;
+        }
+        let frame = WallFrame::of(&p, &nb, i, radius, 0.5 * l0, |_| true).expect("walls in reach");
+        for &e in nb.of(i) {
+            let j = entry_index(e);
+            let r = nb.displacement(&p.position_m, i, e);
+            if p.kind[j] == ParticleKind::Fluid || r.norm() >= radius {
+                continue;
+            }
+            let y = p.position_m[j];
+            // (distance of i to the face, depth of j behind it); the edge block is skipped.
+            let (d_i, d_j) = match (y[1] < 0.0, y[2] < 0.0) {
+                (true, false) => (x[1], -y[1]),
+                (false, true) => (x[2], -y[2]),
+                _ => continue,
+            };
+            let exact = 1.0 + d_j / d_i;
+            let factor = faces
+                .factor_of(e, &r)
+                .expect("every wall particle has a face");
+            assert!(
+                (factor / exact - 1.0).abs() < 1e-12,
+                "fluid at {:?}, wall at {:?}: {factor} against {exact}",
+                x / l0,
+                y / l0
+            );
+            pairs += 1;
+            // Beyond the side wall's reach the fitted plane is the floor itself.
+            if x[1] > radius {
+                assert!((frame.factor(&r) / exact - 1.0).abs() < 1e-12);
+                flat += 1;
+            }
+        }
+    }
+    assert!(
+        pairs > 3000 && flat > 500,
+        "{pairs} pairs, {flat} on the flat floor"
+    );
+}
+
 /// No slip at the walls' surface (`mps.wall_surface_no_slip`): for simple shear u = (a y, 0)
 /// with y from the floor's surface (half a spacing above the wall row) and the walls at rest,
 /// the velocity extrapolated through the surface makes the strain rate's gradient exact at
@@ -461,7 +559,7 @@ fn wall_surface_no_slip_makes_the_shear_exact_next_to_the_floor() {
             StrainRateGradient::Corrected,
             StrainRateGradient::Quadratic,
         ] {
-            let g = velocity_gradient(&p, &nb, &refs, i, model, Some(0.5 * l0), &[]);
+            let g = velocity_gradient(&p, &nb, &refs, i, model, Some(0.5 * l0), &[], None);
             assert!(
                 (g[(0, 1)] - shear).abs() < 1e-9 * shear && g[(1, 0)].abs() < 1e-9,
                 "du/dy {} at y = {}, expected {shear} ({model:?})",
@@ -476,7 +574,16 @@ fn wall_surface_no_slip_makes_the_shear_exact_next_to_the_floor() {
         .copied()
         .find(|&i| p.position_m[i][1] < l0)
         .unwrap();
-    let own = velocity_gradient(&p, &nb, &refs, bottom, StrainRateGradient::Plain, None, &[]);
+    let own = velocity_gradient(
+        &p,
+        &nb,
+        &refs,
+        bottom,
+        StrainRateGradient::Plain,
+        None,
+        &[],
+        None,
+    );
     assert!(
         own[(0, 1)] < 0.85 * shear,
         "du/dy {} with own velocity",
@@ -526,6 +633,7 @@ fn quadratic_strain_rate_is_exact_for_a_parabolic_profile_from_floor_to_surface(
             StrainRateGradient::Quadratic,
             Some(0.5 * l0),
             &[],
+            None,
         );
         assert!(
             (q[(0, 1)] - slope(y)).abs() < 1e-9 * a && q[(1, 0)].abs() < 1e-9 * a,
@@ -541,6 +649,7 @@ fn quadratic_strain_rate_is_exact_for_a_parabolic_profile_from_floor_to_surface(
             StrainRateGradient::Corrected,
             Some(0.5 * l0),
             &[],
+            None,
         );
         worst_corrected = worst_corrected.max((c[(0, 1)] - slope(y)).abs() / a);
     }
@@ -594,6 +703,7 @@ fn a_first_shell_strain_rate_reads_a_thin_plug_as_rigid() {
             StrainRateGradient::Corrected,
             Some(0.5 * l0),
             &[],
+            None,
         );
         // A plug along x: only du/dy can be read.
         assert!(g[(0, 0)].abs() < 1e-9 && g[(1, 0)].abs() < 1e-9 && g[(1, 1)].abs() < 1e-9);

@@ -116,6 +116,7 @@ fn steady(slip_length_m: Option<f64>) -> Vec<(f64, f64, f64)> {
                 settings.gradient,
                 settings.wall_surface_m,
                 &settings.slip_walls,
+                None,
             );
             (
                 p.position_m[i][1],
