@@ -182,7 +182,8 @@ impl<const D: usize> WallFaces<D> {
         let mut normal = normal;
         // A dummy, or a wall particle without a face (a concave edge's), takes the face of
         // its nearest wall particle that has one (ties: the lowest index).
-        let mut nearest: Vec<(f64, usize)> = vec![(f64::INFINITY, usize::MAX); p.len()];
+        let mut nearest: Vec<(f64, usize, Vector<D>)> =
+            vec![(f64::INFINITY, usize::MAX, Vector::<D>::zeros()); p.len()];
         for i in 0..p.len() {
             if depth_m[i] == 0.0 || p.kind[i] != ParticleKind::Wall {
                 continue;
@@ -192,16 +193,17 @@ impl<const D: usize> WallFaces<D> {
                 if !solid(j) || depth_m[j] != 0.0 || Neighbours::plane_bits(e) != 0 {
                     continue;
                 }
-                let d = nb.displacement(&p.position_m, i, e).norm();
-                if d < nearest[j].0 {
-                    nearest[j] = (d, i);
+                // The displacement, not the positions' difference: across a periodic boundary.
+                let r = nb.displacement(&p.position_m, i, e);
+                if r.norm() < nearest[j].0 {
+                    nearest[j] = (r.norm(), i, r);
                 }
             }
         }
-        for (j, &(_, i)) in nearest.iter().enumerate() {
+        for (j, &(_, i, r)) in nearest.iter().enumerate() {
             if i != usize::MAX {
                 normal[j] = normal[i];
-                depth_m[j] = (p.position_m[i] - p.position_m[j]).dot(&normal[i]) + surface_m;
+                depth_m[j] = surface_m - r.dot(&normal[i]);
             }
         }
         Self {
