@@ -122,12 +122,17 @@ impl<'a, const D: usize> Frames<'a, D> {
 /// Then d_i is i's own distance to the face of each wall neighbour.
 #[derive(Debug, Clone, PartialEq)]
 pub struct WallFaces<const D: usize> {
-    // Outward unit normal per particle (zero: none, the fitted frame is used).
-    normal: Vec<Vector<D>>,
-    // Depth of the particle behind its face, in metres.
-    depth_m: Vec<f64>,
+    // Per particle (`None`: no face, the fitted frame is used).
+    face: Vec<Option<Face<D>>>,
     // d_i is kept at least this (as `WallFrame`'s gap).
     min_gap_m: f64,
+}
+
+/// A wall particle's face: its outward unit normal and its depth behind the face, in metres.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Face<const D: usize> {
+    normal: Vector<D>,
+    depth_m: f64,
 }
 
 impl<const D: usize> WallFaces<D> {
@@ -143,12 +148,12 @@ impl<const D: usize> WallFaces<D> {
                     .iter()
                     .any(|&e| p.kind[entry_index(e)] == ParticleKind::Fluid)
         };
-        let normal: Vec<Vector<D>> = (0..p.len())
+        let mut face: Vec<Option<Face<D>>> = (0..p.len())
             .into_par_iter()
             .with_min_len(PARTICLES_PER_TASK)
             .map(|i| {
                 if !wet(i) {
-                    return Vector::<D>::zeros();
+                    return None;
                 }
                 let mut away = Vector::<D>::zeros();
                 let mut total = 0.0;
@@ -163,52 +168,39 @@ impl<const D: usize> WallFaces<D> {
                     total += w * r.norm();
                 }
                 // Solid on all sides (or a shell one particle thick): no face.
-                if away.norm() < FACE_ASYMMETRY * total {
-                    Vector::<D>::zeros()
-                } else {
-                    away / away.norm()
-                }
+                (away.norm() >= FACE_ASYMMETRY * total).then(|| Face {
+                    normal: away / away.norm(),
+                    depth_m: surface_m,
+                })
             })
             .collect();
-        let mut depth_m: Vec<f64> = (0..p.len())
-            .map(|i| {
-                if normal[i] != Vector::<D>::zeros() {
-                    surface_m
-                } else {
-                    0.0
-                }
-            })
-            .collect();
-        let mut normal = normal;
         // A dummy, or a wall particle without a face (a concave edge's), takes the face of
         // its nearest wall particle that has one (ties: the lowest index).
-        let mut nearest: Vec<(f64, usize, Vector<D>)> =
-            vec![(f64::INFINITY, usize::MAX, Vector::<D>::zeros()); p.len()];
-        for i in 0..p.len() {
-            if depth_m[i] == 0.0 || p.kind[i] != ParticleKind::Wall {
-                continue;
-            }
+        let mut nearest: Vec<Option<(f64, Vector<D>, Vector<D>)>> = vec![None; p.len()];
+        for (i, own) in face.iter().enumerate() {
+            let Some(own) = own else { continue };
             for &e in nb.of(i) {
                 let j = entry_index(e);
-                if !solid(j) || depth_m[j] != 0.0 || Neighbours::plane_bits(e) != 0 {
+                if !solid(j) || face[j].is_some() || Neighbours::plane_bits(e) != 0 {
                     continue;
                 }
                 // The displacement, not the positions' difference: across a periodic boundary.
                 let r = nb.displacement(&p.position_m, i, e);
-                if r.norm() < nearest[j].0 {
-                    nearest[j] = (r.norm(), i, r);
+                if nearest[j].is_none_or(|(d, _, _)| r.norm() < d) {
+                    nearest[j] = Some((r.norm(), own.normal, r));
                 }
             }
         }
-        for (j, &(_, i, r)) in nearest.iter().enumerate() {
-            if i != usize::MAX {
-                normal[j] = normal[i];
-                depth_m[j] = surface_m - r.dot(&normal[i]);
+        for (face, nearest) in face.iter_mut().zip(nearest) {
+            if let Some((_, normal, r)) = nearest {
+                *face = Some(Face {
+                    normal,
+                    depth_m: surface_m - r.dot(&normal),
+                });
             }
         }
         Self {
-            normal,
-            depth_m,
+            face,
             min_gap_m: 0.5 * surface_m,
         }
     }
@@ -217,14 +209,10 @@ impl<const D: usize> WallFaces<D> {
     /// d_i i's distance to j's face; `None` where j has no face.
     #[inline]
     pub fn factor_of(&self, e: u32, r_ij: &Vector<D>) -> Option<f64> {
-        let j = entry_index(e);
-        let n = self.normal.get(j)?;
-        if *n == Vector::<D>::zeros() {
-            return None;
-        }
-        let n = Neighbours::reflected(e, *n);
-        let gap_m = ((-r_ij).dot(&n) - self.depth_m[j]).max(self.min_gap_m);
-        Some(1.0 + self.depth_m[j] / gap_m)
+        let face = self.face.get(entry_index(e))?.as_ref()?;
+        let n = Neighbours::reflected(e, face.normal);
+        let gap_m = ((-r_ij).dot(&n) - face.depth_m).max(self.min_gap_m);
+        Some(1.0 + face.depth_m / gap_m)
     }
 }
 
