@@ -112,3 +112,36 @@ fn lattice_sums<const D: usize>(spacing_m: f64, radius_m: f64) -> (f64, f64) {
     }
     (n0, wr2)
 }
+
+/// Shear stiffness of the first-shell repulsion sum_j r_ij w(r_ij)/r_ij^2 (the pressure
+/// regularisation's force per unit of its prefactor, positions in spacings) on a square or
+/// cubic lattice whose rows slide alternately along a lattice axis: the restoring force on a
+/// particle per unit of its displacement. Each neighbour's bond is a central repulsion
+/// phi(r) = w(r)/r; along it the stiffness is -phi'(r), across it -phi(r)/r, negative because
+/// the bond is compressed at rest. The face neighbours above and below give -2 (re - 1), the
+/// four in-plane diagonals re/sqrt(2), in 3D the four out-of-plane diagonals 2 - sqrt(2) re:
+/// K_2D = 2 - (2 - 1/sqrt(2)) re, K_3D = 4 - (2 + 1/sqrt(2)) re for sqrt(2) < re < 2 (the
+/// diagonals inside the radius); -2 (re - 1) for re <= sqrt(2). Negative K lets the mode grow.
+pub fn first_shell_shear_stiffness(dimension: usize, radius_spacings: f64) -> f64 {
+    let re = radius_spacings;
+    if re <= std::f64::consts::SQRT_2 {
+        return -2.0 * (re - 1.0).max(0.0);
+    }
+    let in_plane = 2.0 - (2.0 - std::f64::consts::FRAC_1_SQRT_2) * re;
+    if dimension == 3 {
+        in_plane + 2.0 - std::f64::consts::SQRT_2 * re
+    } else {
+        in_plane
+    }
+}
+
+/// The largest radius (spacings) at which [`first_shell_shear_stiffness`] is positive:
+/// 2 / (2 - 1/sqrt(2)) = 1.547 in 2D, 4 / (2 + 1/sqrt(2)) = 1.478 in 3D. The stable radii
+/// lie between sqrt(2) and this.
+pub fn first_shell_radius_limit(dimension: usize) -> f64 {
+    if dimension == 3 {
+        4.0 / (2.0 + std::f64::consts::FRAC_1_SQRT_2)
+    } else {
+        2.0 / (2.0 - std::f64::consts::FRAC_1_SQRT_2)
+    }
+}

@@ -93,6 +93,18 @@ pub(crate) fn difference_sum<const D: usize>(
     g
 }
 
+/// sum_j r_ij w(|r_ij|)/|r_ij|^2 over i's neighbours within `radius_m`: the gradient model's
+/// sum for the constant 1, zero on a complete lattice shell; it points away from whichever
+/// neighbour is closer than the others (the pressure regularisation's repulsion).
+pub fn shell_repulsion<const D: usize>(
+    positions: &[Vector<D>],
+    nb: &Neighbours,
+    i: usize,
+    radius_m: f64,
+) -> Vector<D> {
+    difference_sum(positions, nb, i, radius_m, |_, _| Some(1.0))
+}
+
 /// Divergence model: d/n0 sum_j (u_j - u_i) . r_ij w(|r_ij|) / |r_ij|^2, where
 /// `difference(e)` returns u_j - u_i for list entry e (a mirror image's u_j reflected, see
 /// [`Neighbours::reflect`]). Only the pair's radial relative velocity counts, so a shear

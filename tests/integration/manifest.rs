@@ -735,8 +735,9 @@ fn invalid_values_are_named_and_located() {
     m.mps.solid_wall_layers = Some(11);
     assert_eq!(fields(&m), ["mps.wall_layers", "mps.solid_wall_layers"]);
 
-    // The pressure regularisation: its radius between the first and the second shell, and
-    // 2D only (measured unstable in 3D).
+    // The pressure regularisation: its radius between the first and the second shell, and in
+    // 3D between sqrt(2) and 1.478 (its first shell's rows slide apart above; 1.5, the
+    // default, is refused there).
     let e = err_with(
         MINIMAL,
         &[
@@ -754,7 +755,35 @@ fn invalid_values_are_named_and_located() {
             "mps.pressure_regularisation=1",
         ],
     );
-    assert_invalid(&e, "mps.pressure_regularisation", None, &["2D only"]);
+    assert_invalid(
+        &e,
+        "mps.regularisation_radius",
+        None,
+        &["(sqrt(2), 1.477)", "3D", "1.5 (default)"],
+    );
+    for radius in ["1.4", "1.48"] {
+        let e = err_with(
+            MINIMAL,
+            &[
+                "dimension=3",
+                "mps.pressure_scheme=incremental",
+                "mps.pressure_regularisation=1",
+                &format!("mps.regularisation_radius={radius}"),
+            ],
+        );
+        assert_invalid(&e, "mps.regularisation_radius", None, &[radius]);
+    }
+    ok_with(
+        MINIMAL,
+        &[
+            "dimension=3",
+            "mps.pressure_scheme=incremental",
+            "mps.pressure_regularisation=1",
+            "mps.regularisation_radius=1.45",
+        ],
+    );
+    // Off, the 3D radius is not read.
+    ok_with(MINIMAL, &["dimension=3", "mps.pressure_scheme=incremental"]);
     // Off, it is no part of the experiment: the hash is the one without the fields.
     let plain = ok_with(MINIMAL, &["mps.pressure_scheme=incremental"]);
     let off = ok_with(

@@ -32,8 +32,8 @@ use super::{PARTICLES_PER_TASK, ParticleKind, PressureScheme, SolveReport, Solve
 use crate::mps::grid::entry_index;
 use crate::mps::kernel::weight;
 use crate::mps::operators::{
-    MIN_DET_RATIO, corrected_gradient, difference_sum, divergence, gradient_correction, inward_sum,
-    moment_matrix,
+    MIN_DET_RATIO, corrected_gradient, divergence, gradient_correction, inward_sum, moment_matrix,
+    shell_repulsion,
 };
 use crate::mps::particles::Vector;
 use crate::mps::pressure::solve_bicgstab;
@@ -356,10 +356,9 @@ impl<const D: usize> Solver<D> {
         if pi <= 0.0 {
             return Vector::<D>::zeros();
         }
-        // sum_j r_ij w/r^2: the gradient model's sum for the constant 1.
         let p = &self.particles;
         let radius = self.config.regularisation_radius_m;
-        difference_sum(&p.position_m, &self.pairs.near, i, radius, |_, _| Some(1.0))
+        shell_repulsion(&p.position_m, &self.pairs.near, i, radius)
             * (beta * pi * D as f64 / self.refs.n0)
     }
 
