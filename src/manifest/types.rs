@@ -231,7 +231,8 @@ pub struct Mps {
     pub pressure_regularisation: f64,
     /// Radius of `pressure_regularisation` in units of spacing, in (1, 2): beyond the first
     /// shell of neighbours (the lattice's diagonal sqrt(2) included at the default), short of
-    /// the second, so that the row below a flat surface has its whole shell.
+    /// the second, so that the row below a flat surface has its whole shell. In 3D below
+    /// 1.478, where the shell still resists a shear of its rows (1.5 does not).
     #[serde(default = "default_regularisation_radius")]
     pub regularisation_radius: f64,
     /// Incremental scheme, units of spacing, in [0, 1]: a free-surface particle holds the
