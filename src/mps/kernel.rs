@@ -120,8 +120,9 @@ fn lattice_sums<const D: usize>(spacing_m: f64, radius_m: f64) -> (f64, f64) {
 /// phi(r) = w(r)/r; along it the stiffness is -phi'(r), across it -phi(r)/r, negative because
 /// the bond is compressed at rest. The face neighbours above and below give -2 (re - 1), the
 /// four in-plane diagonals re/sqrt(2), in 3D the four out-of-plane diagonals 2 - sqrt(2) re:
-/// K_2D = 2 - (2 - 1/sqrt(2)) re, K_3D = 4 - (2 + 1/sqrt(2)) re for sqrt(2) < re < 2 (the
-/// diagonals inside the radius); -2 (re - 1) for re <= sqrt(2). Negative K lets the mode grow.
+/// K_2D = 2 - (2 - 1/sqrt(2)) re, K_3D = 4 - (2 + 1/sqrt(2)) re once the diagonals are inside
+/// the radius (re > sqrt(2)); -2 (re - 1) for 1 < re <= sqrt(2). Negative K lets the mode
+/// grow. Valid up to the next shell: re < 2 in 2D, re < sqrt(3) (the cube's corners) in 3D.
 pub fn first_shell_shear_stiffness(dimension: usize, radius_spacings: f64) -> f64 {
     let re = radius_spacings;
     if re <= std::f64::consts::SQRT_2 {

@@ -402,25 +402,23 @@ fn the_regularisations_first_shell_resists_shear_only_below_its_radius_limit() {
 }
 
 /// A 3D tank at rest with the regularisation at a radius inside the 3D limit (1.45) stays
-/// still: below 1 mm/s (9.2e-5 m/s measured, 1.9e-5 without it) and hydrostatic. At 1.5 the shear mode grows, but from this small tank's noise too slowly for a
-/// test; the stiffness test above covers that side.
+/// still: below 1 mm/s (9.2e-5 m/s measured, 1.9e-5 without it) and hydrostatic. At 1.5 this
+/// small tank does not leave its rest within the test's 1.5 s either (the larger one
+/// does, after 0.5 s); the stiffness test above covers that side.
 #[test]
 fn pressure_regularisation_keeps_a_3d_tank_still_inside_its_radius_limit() {
-    let run = |beta: f64| {
-        still_tank_configured::<3>([12, 6, 12], 10, 1.5, 0.0, |cfg, l0| {
-            cfg.pressure_scheme = PressureScheme::Incremental;
-            cfg.pair_stabilisation_m = 0.8 * l0;
-            cfg.wall_support_m = 0.95 * l0;
-            cfg.pressure_regularisation = beta;
-            cfg.regularisation_radius_m = 1.45 * l0;
-        })
-    };
-    let (with, bottom_with) = run(1.0);
-    eprintln!("3D still tank: max speed {with:.3e} m/s with beta 1 at radius 1.45");
-    assert!(with < 1e-3, "max speed {with:.3e} m/s");
+    let (speed, bottom_error) = still_tank_configured::<3>([12, 6, 12], 10, 1.5, 0.0, |cfg, l0| {
+        cfg.pressure_scheme = PressureScheme::Incremental;
+        cfg.pair_stabilisation_m = 0.8 * l0;
+        cfg.wall_support_m = 0.95 * l0;
+        cfg.pressure_regularisation = 1.0;
+        cfg.regularisation_radius_m = 1.45 * l0;
+    });
+    eprintln!("3D still tank: max speed {speed:.3e} m/s with beta 1 at radius 1.45");
+    assert!(speed < 1e-3, "max speed {speed:.3e} m/s");
     assert!(
-        bottom_with.abs() < 0.005,
-        "bottom pressure error {bottom_with:.4}"
+        bottom_error.abs() < 0.005,
+        "bottom pressure error {bottom_error:.4}"
     );
 }
 
