@@ -460,20 +460,24 @@ impl<const D: usize> Solver<D> {
         let incremental = self.config.pressure_scheme == PressureScheme::Incremental;
         let pressure_accel = incremental.then(|| self.carried_pressure_acceleration());
         let viscosity_started = Instant::now();
-        let faces =
-            (self.config.wall_surface_no_slip && self.config.wall_face_normals).then(|| {
+        let settings = self.viscous_settings();
+        // Faces in front of the walls at the no-slip surface's own distance.
+        let faces = settings
+            .wall_surface_m
+            .filter(|_| self.config.wall_face_normals)
+            .map(|surface_m| {
                 WallFaces::build(
                     &self.particles,
                     &self.neighbours,
                     FACE_RADIUS_SPACINGS * self.config.spacing_m,
-                    0.5 * self.config.spacing_m,
+                    surface_m,
                 )
             });
         let stage = predict_velocity(
             &self.particles,
             &self.pairs,
             &self.refs,
-            &self.viscous_settings(),
+            &settings,
             Loads {
                 body_force_m_s2: self.gravity(),
                 pressure_accel_m_s2: pressure_accel.as_deref(),

@@ -176,7 +176,8 @@ impl<const D: usize> WallFaces<D> {
             .collect();
         // A dummy, or a wall particle without a face (a concave edge's), takes the face of
         // its nearest wall particle that has one (ties: the lowest index).
-        let mut nearest: Vec<Option<(f64, Vector<D>, Vector<D>)>> = vec![None; p.len()];
+        // (normal, displacement from that wall particle) per particle.
+        let mut nearest: Vec<Option<(Vector<D>, Vector<D>)>> = vec![None; p.len()];
         for (i, own) in face.iter().enumerate() {
             let Some(own) = own else { continue };
             for &e in nb.of(i) {
@@ -186,13 +187,13 @@ impl<const D: usize> WallFaces<D> {
                 }
                 // The displacement, not the positions' difference: across a periodic boundary.
                 let r = nb.displacement(&p.position_m, i, e);
-                if nearest[j].is_none_or(|(d, _, _)| r.norm() < d) {
-                    nearest[j] = Some((r.norm(), own.normal, r));
+                if nearest[j].is_none_or(|(_, near)| r.norm() < near.norm()) {
+                    nearest[j] = Some((own.normal, r));
                 }
             }
         }
         for (face, nearest) in face.iter_mut().zip(nearest) {
-            if let Some((_, normal, r)) = nearest {
+            if let Some((normal, r)) = nearest {
                 *face = Some(Face {
                     normal,
                     depth_m: surface_m - r.dot(&normal),
