@@ -8,7 +8,8 @@
 //! (`mps.ppe_preconditioner: jacobi`, `mps.multigrid_over_correction` at 1 or under Jacobi,
 //! `mps.pressure_scheme: standard` with
 //! `mps.compression_relaxation`, `mps.pair_stabilisation`, `mps.wall_support` and
-//! `mps.pressure_regularisation` (with `mps.regularisation_radius`), `mps.surface_depth` and
+//! `mps.pressure_regularisation` (with `mps.regularisation_radius`), `mps.surface_depth`,
+//! `mps.pressure_smoothing_time_s` and
 //! `mps.particle_shifting` (with `mps.particle_shifting_limit`) at 0 (and under the standard
 //! scheme), `mps.pressure_floor_pa` at 0, `mps.yield_penalty_pa_s` at 0 (with
 //! `mps.yield_max_iterations` and `mps.yield_tolerance_1_s`), `mps.yield_velocity_fraction` at
@@ -73,6 +74,10 @@ pub fn canonical_text<S: SceneSection>(manifest: &Manifest<S>) -> String {
             ),
             ("surface_depth", manifest.mps.surface_depth),
             ("particle_shifting", manifest.mps.particle_shifting),
+            (
+                "pressure_smoothing_time_s",
+                manifest.mps.pressure_smoothing_time_s,
+            ),
         ] {
             if v == 0.0 || manifest.mps.pressure_scheme == PressureSchemeName::Standard {
                 mps.remove(key);

@@ -235,6 +235,15 @@ pub struct Mps {
     /// 1.478, where the shell still resists a shear of its rows (1.5 does not).
     #[serde(default = "default_regularisation_radius")]
     pub regularisation_radius: f64,
+    /// Incremental scheme, seconds: after each step every interior fluid particle's carried
+    /// pressure moves a share dt/T of the way toward the kernel-weighted mean of its fluid
+    /// neighbours' pressures carried back to it along the hydrostatic gradient,
+    /// p_j - rho g . r_ij. Exact (idle) for hydrostatic pressure; it removes the
+    /// particle-scale noise that the increment leaves where the predicted velocity has no
+    /// divergence (rigid material), which the velocity correction never sees. 0 = off. In
+    /// [0, 1000]. Unused by `standard`.
+    #[serde(default)]
+    pub pressure_smoothing_time_s: f64,
     /// Incremental scheme, units of spacing, in [0, 1]: a free-surface particle holds the
     /// hydrostatic pressure of this depth of fluid beyond its centre along its outward normal,
     /// rho |g| d l0 max(-n . g/|g|, 0) (n from its neighbours, walls standing above it left
@@ -408,6 +417,7 @@ impl Default for Mps {
             wall_support: 0.0,
             pressure_regularisation: 0.0,
             regularisation_radius: default_regularisation_radius(),
+            pressure_smoothing_time_s: 0.0,
             surface_depth: 0.0,
             pressure_floor_pa: 0.0,
             particle_shifting: 0.0,

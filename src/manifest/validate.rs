@@ -217,6 +217,11 @@ pub fn check<S: SceneSection>(m: &Manifest<S>) -> Vec<Issue> {
         between(1.0, false, 2.0, false),
     );
     c.real(
+        "mps.pressure_smoothing_time_s",
+        p.pressure_smoothing_time_s,
+        between(0.0, true, 1000.0, true),
+    );
+    c.real(
         "mps.multigrid_over_correction",
         p.multigrid_over_correction,
         between(0.0, false, 2.0, false),

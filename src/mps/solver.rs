@@ -85,6 +85,10 @@ pub struct SolverConfig<const D: usize> {
     /// Zero on a lattice at rest.
     pub pressure_regularisation: f64,
     pub regularisation_radius_m: f64,
+    /// Incremental scheme: time constant T (s) of the carried pressure's smoothing toward
+    /// the mean of its fluid neighbours' p_j - rho g . r_ij (0 = off). Idle on hydrostatic
+    /// pressure.
+    pub pressure_smoothing_time_s: f64,
     /// Incremental scheme: a free-surface particle holds rho |g| surface_depth_m
     /// max(-n . g/|g|, 0) (0 = p = 0 at surface particles).
     pub surface_depth_m: f64,

@@ -208,6 +208,7 @@ pub fn run_info(path: &Path, size_bytes: u64, run: &RunFile) -> RunInfo {
                 "wall_support",
                 "pressure_regularisation",
                 "regularisation_radius",
+                "pressure_smoothing_time_s",
                 "surface_depth",
                 "pressure_floor_pa",
                 "particle_shifting",

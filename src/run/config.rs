@@ -90,6 +90,7 @@ pub fn solver_config<const D: usize>(m: &Manifest, scene: &Scene<D>) -> SolverCo
         pair_stabilisation_m: m.mps.pair_stabilisation * l0,
         wall_support_m: m.mps.wall_support * l0,
         pressure_regularisation: m.mps.pressure_regularisation,
+        pressure_smoothing_time_s: m.mps.pressure_smoothing_time_s,
         regularisation_radius_m: m.mps.regularisation_radius * l0,
         surface_depth_m: m.mps.surface_depth * l0,
         pressure_floor_pa: m.mps.pressure_floor_pa,

@@ -64,6 +64,7 @@ pub fn config<const D: usize>(
         pair_stabilisation_m: 0.0,
         wall_support_m: 0.0,
         pressure_regularisation: 0.0,
+        pressure_smoothing_time_s: 0.0,
         regularisation_radius_m: 1.5 * l0,
         surface_depth_m: 0.0,
         pressure_floor_pa: 0.0,

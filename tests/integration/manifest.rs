@@ -817,6 +817,7 @@ fn invalid_values_are_named_and_located() {
             "mps.particle_shifting=0",
             "mps.particle_shifting_limit=0.2",
             "mps.pressure_floor_pa=0",
+            "mps.pressure_smoothing_time_s=0",
         ],
     );
     assert_eq!(plain.hash_hex, off.hash_hex);
@@ -827,6 +828,7 @@ fn invalid_values_are_named_and_located() {
         "mps.wall_surface_no_slip=true",
         "mps.quadratic_strain_rate=true",
         "mps.exact_projection=true",
+        "mps.pressure_smoothing_time_s=0.01",
     ] {
         let on = ok_with(MINIMAL, &["mps.pressure_scheme=incremental", on]);
         assert_ne!(plain.hash_hex, on.hash_hex);
@@ -855,8 +857,9 @@ fn invalid_values_are_named_and_located() {
     let e = err_with(MINIMAL, &["mps.pressure_floor_pa=10"]);
     assert_invalid(&e, "mps.pressure_floor_pa", None, &["[-101325, 0]", "10"]);
     // The floor is read by the standard scheme too.
+    let plain_standard = ok_with(MINIMAL, &[]);
     let standard_floor = ok_with(MINIMAL, &["mps.pressure_floor_pa=-1000"]);
-    assert_ne!(ok_with(MINIMAL, &[]).hash_hex, standard_floor.hash_hex);
+    assert_ne!(plain_standard.hash_hex, standard_floor.hash_hex);
     // The shifting's limit is part of the experiment once shifting is on.
     let shifting = [
         "mps.pressure_scheme=incremental",
@@ -868,6 +871,18 @@ fn invalid_values_are_named_and_located() {
         &[&shifting[..], &["mps.particle_shifting_limit=0.1"]].concat(),
     );
     assert_ne!(shifted.hash_hex, limited.hash_hex);
+    // The standard scheme does not read the smoothing: the same experiment.
+    assert_eq!(
+        plain_standard.hash_hex,
+        ok_with(MINIMAL, &["mps.pressure_smoothing_time_s=0.01"]).hash_hex
+    );
+    let e = err_with(MINIMAL, &["mps.pressure_smoothing_time_s=-0.01"]);
+    assert_invalid(
+        &e,
+        "mps.pressure_smoothing_time_s",
+        None,
+        &["[0, 1000]", "-0.01"],
+    );
     let e = err_with(MINIMAL, &["mps.particle_shifting=-1"]);
     assert_invalid(&e, "mps.particle_shifting", None, &["[0, 1000]", "-1"]);
     let e = err_with(MINIMAL, &["mps.particle_shifting_limit=0"]);

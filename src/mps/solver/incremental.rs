@@ -243,6 +243,40 @@ impl<const D: usize> Solver<D> {
                 }
             })
             .collect();
+        // Pressure smoothing: interior fluid moves a share dt/T of the way toward the
+        // kernel-weighted mean of its fluid neighbours' pressures carried back to it along
+        // rho g (p_j - rho g . r_ij): exact for hydrostatic pressure, it removes the
+        // particle-scale noise that the increment leaves where u* has no divergence.
+        let new_pressure = if c.pressure_smoothing_time_s > 0.0 {
+            let share = (dt_s / c.pressure_smoothing_time_s).min(1.0);
+            let rho_g = self.gravity() * rho;
+            map_particles(p.len(), |i| {
+                let pi = new_pressure[i];
+                if !is_fluid(i) || unknown_of[i] == u32::MAX {
+                    return pi;
+                }
+                let (mut sum, mut weights) = (0.0, 0.0);
+                for &e in near.of(i) {
+                    let j = entry_index(e);
+                    if !is_fluid(j) {
+                        continue;
+                    }
+                    let r = near.displacement(&p.position_m, i, e);
+                    let w = weight(r.norm(), refs.radius_n_m);
+                    if w > 0.0 {
+                        sum += w * (new_pressure[j] - rho_g.dot(&r));
+                        weights += w;
+                    }
+                }
+                if weights > 0.0 {
+                    (pi + share * (sum / weights - pi)).max(self.config.pressure_floor_pa)
+                } else {
+                    pi
+                }
+            })
+        } else {
+            new_pressure
+        };
         let scale = -dt_s / rho;
         let dv: Vec<Vector<D>> = (0..p.len())
             .into_par_iter()
