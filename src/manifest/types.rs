@@ -237,8 +237,8 @@ pub struct Mps {
     pub regularisation_radius: f64,
     /// Incremental scheme, seconds: after each step every interior fluid particle's carried
     /// pressure moves a share dt/T of the way toward the kernel-weighted mean of its fluid
-    /// neighbours' pressures carried back to it along the hydrostatic gradient,
-    /// p_j - rho g . r_ij. Exact (idle) for hydrostatic pressure; it removes the
+    /// neighbours' pressures carried back to it along their fitted plane, p_j - G_i . r_ij
+    /// (G_i their corrected gradient). Idle for any linear pressure; it removes the
     /// particle-scale noise that the increment leaves where the predicted velocity has no
     /// divergence (rigid material), which the velocity correction never sees. 0 = off. In
     /// [0, 1000]. Unused by `standard`.

@@ -206,11 +206,59 @@ pub fn gradient_correction<const D: usize>(
     n0: f64,
     min_det_ratio: f64,
 ) -> nalgebra::SMatrix<f64, D, D> {
+    well_conditioned_inverse(m, n0, min_det_ratio)
+        .unwrap_or_else(|| nalgebra::SMatrix::<f64, D, D>::identity() * (D as f64 / n0))
+}
+
+/// The pressure smoothing's step toward the local mean (`mps.pressure_smoothing_time_s`):
+/// sum_j w_ij (v_j - v_i - G_i . r_ij) / sum_j w_ij over i's neighbours within `radius_m` whose
+/// `value(j)` is Some(v_j) (i's own must be), G_i their corrected gradient of v (`fallback_gradient` where they do not
+/// span every direction, see [`MIN_DET_RATIO`]); 0 without such neighbours. Zero for any
+/// linear v wherever G_i is corrected: only the part of v that no plane fits is smoothed.
+#[inline]
+pub fn smoothing_excess<const D: usize>(
+    positions: &[Vector<D>],
+    nb: &Neighbours,
+    i: usize,
+    radius_m: f64,
+    n0: f64,
+    value: impl Fn(usize) -> Option<f64>,
+    fallback_gradient: Vector<D>,
+) -> f64 {
+    let neighbours = || {
+        weighted_neighbours(positions, nb, i, radius_m)
+            .filter_map(|(e, r, r2, w)| value(entry_index(e)).map(|v| (v, r, r2, w)))
+    };
+    let vi = value(i).expect("the particle smoothed has a value");
+    let mut moments = nalgebra::SMatrix::<f64, D, D>::zeros();
+    let mut sum = Vector::<D>::zeros();
+    for (vj, r, r2, w) in neighbours() {
+        moments += r * r.transpose() * (w / r2);
+        sum += r * ((vj - vi) * w / r2);
+    }
+    let gradient = well_conditioned_inverse(&moments, n0, MIN_DET_RATIO)
+        .map_or(fallback_gradient, |inverse| inverse * sum);
+    let (mut excess, mut weights) = (0.0, 0.0);
+    for (vj, r, _, w) in neighbours() {
+        excess += w * (vj - vi - gradient.dot(&r));
+        weights += w;
+    }
+    if weights > 0.0 { excess / weights } else { 0.0 }
+}
+
+/// M_i^-1 where det M_i is at least `min_det_ratio` times the full lattice's (n0/d)^d (see
+/// [`gradient_correction`]), else None.
+#[inline]
+pub fn well_conditioned_inverse<const D: usize>(
+    m: &nalgebra::SMatrix<f64, D, D>,
+    n0: f64,
+    min_det_ratio: f64,
+) -> Option<nalgebra::SMatrix<f64, D, D>> {
     let full = n0 / D as f64;
     let lattice_det = (0..D).fold(1.0, |v, _| v * full);
     match determinant_and_inverse(m) {
-        Some((det, inverse)) if det >= min_det_ratio * lattice_det => inverse,
-        _ => nalgebra::SMatrix::<f64, D, D>::identity() * (1.0 / full),
+        Some((det, inverse)) if det >= min_det_ratio * lattice_det => Some(inverse),
+        _ => None,
     }
 }
 

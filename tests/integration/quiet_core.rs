@@ -8,7 +8,7 @@ use core_setup::{advance, config, walled_box};
 use mps_runner::mps::grid::Neighbours;
 use mps_runner::mps::kernel::{first_shell_radius_limit, first_shell_shear_stiffness};
 use mps_runner::mps::operators::{
-    corrected_gradient, gradient_correction, moment_matrix, shell_repulsion,
+    corrected_gradient, gradient_correction, moment_matrix, shell_repulsion, smoothing_excess,
 };
 use mps_runner::mps::{ParticleKind, PressureScheme, Solver, SolverConfig, Vector};
 
@@ -23,8 +23,9 @@ fn jitter(state: &mut u64) -> f64 {
 /// Corrected gradient of a linear field at every particle of a lattice of `side` cells whose
 /// points are moved by up to `disorder` spacings; `half` keeps only the lower half (a flat free
 /// surface above the middle row). Returns the largest relative error over the particles whose
-/// moment matrix passes the conditioning guard, and how many did.
-fn linear_field_error<const D: usize>(side: i64, disorder: f64, half: bool) -> (f64, usize) {
+/// moment matrix passes the conditioning guard, how many did, and the largest step of the
+/// pressure smoothing ([`smoothing_excess`]) on that field, in units of |slope| l0.
+fn linear_field_error<const D: usize>(side: i64, disorder: f64, half: bool) -> (f64, usize, f64) {
     let l0 = 0.01;
     let re = 2.1 * l0;
     let n0 = mps_runner::mps::kernel::RefValues::on_lattice::<D>(l0, re, 3.1 * l0).n0;
@@ -51,6 +52,8 @@ fn linear_field_error<const D: usize>(side: i64, disorder: f64, half: bool) -> (
     let field = |x: &Vector<D>| 50.0 + slope.dot(x);
     let mut worst = 0.0f64;
     let mut corrected = 0;
+    let values: Vec<f64> = pos.iter().map(field).collect();
+    let mut smoothing = 0.0f64;
     let interior = |x: &Vector<D>| {
         // Away from the lattice's sides (whose stencils the test does not complete), except
         // the free surface of the half lattice.
@@ -66,15 +69,18 @@ fn linear_field_error<const D: usize>(side: i64, disorder: f64, half: bool) -> (
         let g = corrected_gradient(&pos, &nb, i, re, &c, |j, _| field(&pos[j]) - fi);
         worst = worst.max((g - slope).norm() / slope.norm());
         corrected += 1;
+        // A fallback gradient far from the slope: the step must not depend on it.
+        let step = smoothing_excess(&pos, &nb, i, re, n0, |j| Some(values[j]), -slope);
+        smoothing = smoothing.max(step.abs() / (slope.norm() * l0));
     }
-    (worst, corrected)
+    (worst, corrected, smoothing)
 }
 
 #[test]
 fn corrected_gradient_is_exact_for_linear_fields_on_disordered_and_truncated_stencils() {
     for (disorder, half) in [(0.0, false), (0.2, false), (0.0, true), (0.2, true)] {
-        let (e2, n2) = linear_field_error::<2>(14, disorder, half);
-        let (e3, n3) = linear_field_error::<3>(8, disorder, half);
+        let (e2, n2, s2) = linear_field_error::<2>(14, disorder, half);
+        let (e3, n3, s3) = linear_field_error::<3>(8, disorder, half);
         // Interior particles of the small 3D half lattice: 2 x 2 columns of 2 rows.
         assert!(n2 >= 8 && n3 >= 8, "too few particles checked: {n2}, {n3}");
         // Round-off only: the uncorrected gradient is off by 50 % at a flat surface's top row
@@ -82,6 +88,13 @@ fn corrected_gradient_is_exact_for_linear_fields_on_disordered_and_truncated_ste
         assert!(
             e2 < 1e-10 && e3 < 1e-10,
             "disorder {disorder}, half {half}: relative error {e2:.2e} (2D), {e3:.2e} (3D)"
+        );
+        // The pressure smoothing leaves a linear field where it is, on the same stencils (a
+        // mean carried back along a fixed gradient would move the surface rows by about
+        // |slope| l0 / 2 here).
+        assert!(
+            s2 < 1e-10 && s3 < 1e-10,
+            "disorder {disorder}, half {half}: smoothing step {s2:.2e} (2D), {s3:.2e} (3D)"
         );
     }
 }

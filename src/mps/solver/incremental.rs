@@ -33,7 +33,7 @@ use crate::mps::grid::entry_index;
 use crate::mps::kernel::weight;
 use crate::mps::operators::{
     MIN_DET_RATIO, corrected_gradient, divergence, gradient_correction, inward_sum, moment_matrix,
-    shell_repulsion,
+    shell_repulsion, smoothing_excess,
 };
 use crate::mps::particles::Vector;
 use crate::mps::pressure::solve_bicgstab;
@@ -245,8 +245,10 @@ impl<const D: usize> Solver<D> {
             .collect();
         // Pressure smoothing: interior fluid moves a share dt/T of the way toward the
         // kernel-weighted mean of its fluid neighbours' pressures carried back to it along
-        // rho g (p_j - rho g . r_ij): exact for hydrostatic pressure, it removes the
-        // particle-scale noise that the increment leaves where u* has no divergence.
+        // the local gradient G_i (p_j - G_i . r_ij, G_i the corrected gradient over the same
+        // fluid neighbours; rho g where they do not span every direction): exact for any
+        // linear pressure on any stencil, it removes the particle-scale noise that the
+        // increment leaves where u* has no divergence.
         let new_pressure = if c.pressure_smoothing_time_s > 0.0 {
             let share = (dt_s / c.pressure_smoothing_time_s).min(1.0);
             let rho_g = self.gravity() * rho;
@@ -255,24 +257,16 @@ impl<const D: usize> Solver<D> {
                 if !is_fluid(i) || unknown_of[i] == u32::MAX {
                     return pi;
                 }
-                let (mut sum, mut weights) = (0.0, 0.0);
-                for &e in near.of(i) {
-                    let j = entry_index(e);
-                    if !is_fluid(j) {
-                        continue;
-                    }
-                    let r = near.displacement(&p.position_m, i, e);
-                    let w = weight(r.norm(), refs.radius_n_m);
-                    if w > 0.0 {
-                        sum += w * (new_pressure[j] - rho_g.dot(&r));
-                        weights += w;
-                    }
-                }
-                if weights > 0.0 {
-                    (pi + share * (sum / weights - pi)).max(self.config.pressure_floor_pa)
-                } else {
-                    pi
-                }
+                let excess = smoothing_excess(
+                    &p.position_m,
+                    near,
+                    i,
+                    refs.radius_n_m,
+                    refs.n0,
+                    |j| is_fluid(j).then(|| new_pressure[j]),
+                    rho_g,
+                );
+                (pi + share * excess).max(self.config.pressure_floor_pa)
             })
         } else {
             new_pressure
