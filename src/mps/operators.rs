@@ -210,13 +210,14 @@ pub fn gradient_correction<const D: usize>(
         .unwrap_or_else(|| nalgebra::SMatrix::<f64, D, D>::identity() * (D as f64 / n0))
 }
 
-/// The pressure smoothing's step toward the local mean (`mps.pressure_smoothing_time_s`):
-/// sum_j w_ij (v_j - v_i - G_i . r_ij) / sum_j w_ij over i's neighbours within `radius_m` whose
+/// The pressure smoothing's sums (`mps.pressure_smoothing_time_s`): (sum_j w_ij (v_j - v_i -
+/// G_i . r_ij), sum_j w_ij), whose ratio is the step toward the local mean, over i's
+/// neighbours within `radius_m` whose
 /// `value(j)` is Some(v_j) (i's own must be), G_i their corrected gradient of v (`fallback_gradient` where they do not
-/// span every direction, see [`MIN_DET_RATIO`]); 0 without such neighbours. Zero for any
-/// linear v wherever G_i is corrected: only the part of v that no plane fits is smoothed.
+/// span every direction, see [`MIN_DET_RATIO`]). The first is zero for any linear v wherever
+/// G_i is corrected: only the part of v that no plane fits is smoothed.
 #[inline]
-pub fn smoothing_excess<const D: usize>(
+pub fn smoothing_sums<const D: usize>(
     positions: &[Vector<D>],
     nb: &Neighbours,
     i: usize,
@@ -224,7 +225,7 @@ pub fn smoothing_excess<const D: usize>(
     n0: f64,
     value: impl Fn(usize) -> Option<f64>,
     fallback_gradient: Vector<D>,
-) -> f64 {
+) -> (f64, f64) {
     let neighbours = || {
         weighted_neighbours(positions, nb, i, radius_m)
             .filter_map(|(e, r, r2, w)| value(entry_index(e)).map(|v| (v, r, r2, w)))
@@ -243,7 +244,7 @@ pub fn smoothing_excess<const D: usize>(
         excess += w * (vj - vi - gradient.dot(&r));
         weights += w;
     }
-    if weights > 0.0 { excess / weights } else { 0.0 }
+    (excess, weights)
 }
 
 /// M_i^-1 where det M_i is at least `min_det_ratio` times the full lattice's (n0/d)^d (see

@@ -87,7 +87,7 @@ pub struct SolverConfig<const D: usize> {
     pub regularisation_radius_m: f64,
     /// Incremental scheme: time constant T (s) of the carried pressure's smoothing toward
     /// the mean of its fluid neighbours' p_j - G_i . r_ij (0 = off; see
-    /// `operators::smoothing_excess`). Idle on any linear pressure.
+    /// `operators::smoothing_sums`). Idle on any linear pressure.
     pub pressure_smoothing_time_s: f64,
     /// Incremental scheme: a free-surface particle holds rho |g| surface_depth_m
     /// max(-n . g/|g|, 0) (0 = p = 0 at surface particles).

@@ -8,7 +8,7 @@ use core_setup::{advance, config, walled_box};
 use mps_runner::mps::grid::Neighbours;
 use mps_runner::mps::kernel::{first_shell_radius_limit, first_shell_shear_stiffness};
 use mps_runner::mps::operators::{
-    corrected_gradient, gradient_correction, moment_matrix, shell_repulsion, smoothing_excess,
+    corrected_gradient, gradient_correction, moment_matrix, shell_repulsion, smoothing_sums,
 };
 use mps_runner::mps::{ParticleKind, PressureScheme, Solver, SolverConfig, Vector};
 
@@ -24,7 +24,7 @@ fn jitter(state: &mut u64) -> f64 {
 /// points are moved by up to `disorder` spacings; `half` keeps only the lower half (a flat free
 /// surface above the middle row). Returns the largest relative error over the particles whose
 /// moment matrix passes the conditioning guard, how many did, and the largest step of the
-/// pressure smoothing ([`smoothing_excess`]) on that field, in units of |slope| l0.
+/// pressure smoothing ([`smoothing_sums`]) on that field, in units of |slope| l0.
 fn linear_field_error<const D: usize>(side: i64, disorder: f64, half: bool) -> (f64, usize, f64) {
     let l0 = 0.01;
     let re = 2.1 * l0;
@@ -70,7 +70,8 @@ fn linear_field_error<const D: usize>(side: i64, disorder: f64, half: bool) -> (
         worst = worst.max((g - slope).norm() / slope.norm());
         corrected += 1;
         // A fallback gradient far from the slope: the step must not depend on it.
-        let step = smoothing_excess(&pos, &nb, i, re, n0, |j| Some(values[j]), -slope);
+        let (excess, weights) = smoothing_sums(&pos, &nb, i, re, n0, |j| Some(values[j]), -slope);
+        let step = excess / weights;
         smoothing = smoothing.max(step.abs() / (slope.norm() * l0));
     }
     (worst, corrected, smoothing)

@@ -33,7 +33,7 @@ use crate::mps::grid::entry_index;
 use crate::mps::kernel::weight;
 use crate::mps::operators::{
     MIN_DET_RATIO, corrected_gradient, divergence, gradient_correction, inward_sum, moment_matrix,
-    shell_repulsion, smoothing_excess,
+    shell_repulsion, smoothing_sums,
 };
 use crate::mps::particles::Vector;
 use crate::mps::pressure::solve_bicgstab;
@@ -257,7 +257,7 @@ impl<const D: usize> Solver<D> {
                 if !is_fluid(i) || unknown_of[i] == u32::MAX {
                     return pi;
                 }
-                let excess = smoothing_excess(
+                let (excess, weights) = smoothing_sums(
                     &p.position_m,
                     near,
                     i,
@@ -266,7 +266,11 @@ impl<const D: usize> Solver<D> {
                     |j| is_fluid(j).then(|| new_pressure[j]),
                     rho_g,
                 );
-                (pi + share * excess).max(self.config.pressure_floor_pa)
+                if weights > 0.0 {
+                    (pi + share * excess / weights).max(self.config.pressure_floor_pa)
+                } else {
+                    pi
+                }
             })
         } else {
             new_pressure
