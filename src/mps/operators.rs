@@ -210,12 +210,12 @@ pub fn gradient_correction<const D: usize>(
         .unwrap_or_else(|| nalgebra::SMatrix::<f64, D, D>::identity() * (D as f64 / n0))
 }
 
-/// The pressure smoothing's sums (`mps.pressure_smoothing_time_s`): (sum_j w_ij (v_j - v_i -
-/// G_i . r_ij), sum_j w_ij), whose ratio is the step toward the local mean, over i's
-/// neighbours within `radius_m` whose
-/// `value(j)` is Some(v_j) (i's own must be), G_i their corrected gradient of v (`fallback_gradient` where they do not
-/// span every direction, see [`MIN_DET_RATIO`]). The first is zero for any linear v wherever
-/// G_i is corrected: only the part of v that no plane fits is smoothed.
+/// The pressure smoothing's sums (`mps.pressure_smoothing_time_s`):
+/// (sum_j w_ij (v_j - v_i - G_i . r_ij), sum_j w_ij), whose ratio is the step toward the
+/// local mean, over i's neighbours within `radius_m` whose `value(j)` is Some(v_j) (i's own
+/// must be), G_i their corrected gradient of v (`fallback_gradient` where they do not span
+/// every direction, see [`MIN_DET_RATIO`]). The first is zero for any linear v wherever G_i
+/// is corrected: only the part of v that no plane fits is smoothed.
 #[inline]
 pub fn smoothing_sums<const D: usize>(
     positions: &[Vector<D>],
