@@ -206,8 +206,10 @@ pub fn gradient_correction<const D: usize>(
     n0: f64,
     min_det_ratio: f64,
 ) -> nalgebra::SMatrix<f64, D, D> {
+    // 1 / (n0/d), written as before the split (d/n0 may differ in its last bit).
+    let full = n0 / D as f64;
     well_conditioned_inverse(m, n0, min_det_ratio)
-        .unwrap_or_else(|| nalgebra::SMatrix::<f64, D, D>::identity() * (D as f64 / n0))
+        .unwrap_or_else(|| nalgebra::SMatrix::<f64, D, D>::identity() * (1.0 / full))
 }
 
 /// The pressure smoothing's sums (`mps.pressure_smoothing_time_s`):
