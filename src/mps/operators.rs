@@ -234,13 +234,15 @@ pub fn smoothing_sums<const D: usize>(
     };
     let vi = value(i).expect("the particle smoothed has a value");
     let mut moments = nalgebra::SMatrix::<f64, D, D>::zeros();
-    let mut sum = Vector::<D>::zeros();
-    for (vj, r, r2, w) in neighbours() {
+    for (_, r, r2, w) in neighbours() {
         moments += r * r.transpose() * (w / r2);
-        sum += r * ((vj - vi) * w / r2);
     }
-    let gradient = well_conditioned_inverse(&moments, n0, MIN_DET_RATIO)
-        .map_or(fallback_gradient, |inverse| inverse * sum);
+    let gradient = well_conditioned_inverse(&moments, n0, MIN_DET_RATIO).map_or(
+        fallback_gradient,
+        |inverse| {
+            inverse * difference_sum(positions, nb, i, radius_m, |j, _| value(j).map(|v| v - vi))
+        },
+    );
     let (mut excess, mut weights) = (0.0, 0.0);
     for (vj, r, _, w) in neighbours() {
         excess += w * (vj - vi - gradient.dot(&r));

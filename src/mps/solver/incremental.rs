@@ -248,7 +248,8 @@ impl<const D: usize> Solver<D> {
         // the local gradient G_i (p_j - G_i . r_ij, G_i the corrected gradient over the same
         // fluid neighbours; rho g where they do not span every direction): exact for any
         // linear pressure on any stencil, it removes the particle-scale noise that the
-        // increment leaves where u* has no divergence.
+        // increment leaves where u* has no divergence. After the increment is taken, so the
+        // velocity correction stays unsmoothed.
         let new_pressure = if c.pressure_smoothing_time_s > 0.0 {
             let share = (dt_s / c.pressure_smoothing_time_s).min(1.0);
             let rho_g = self.gravity() * rho;
