@@ -59,12 +59,46 @@ fn slip_wall_of(slip_walls: &[SlipWall], j: usize) -> Option<&SlipWall> {
     slip_walls.iter().find(|w| w.particles.contains(&j))
 }
 
+/// How the walls meet the fluid in the velocity gradient and the viscous term: where the
+/// no-slip condition holds, which bodies slip, and each wall particle's own face.
+#[derive(Debug, Clone, Copy)]
+pub struct Walls<'a, const D: usize> {
+    /// [`ViscousSettings::wall_surface_m`].
+    pub surface_m: Option<f64>,
+    /// [`ViscousSettings::slip_walls`].
+    pub slip: &'a [SlipWall],
+    /// Each wall particle's own face for the no-slip walls (`mps.wall_face_normals`; `None`:
+    /// one frame fitted per fluid particle, [`WallFrame`]).
+    pub faces: Option<&'a WallFaces<D>>,
+}
+
+impl<'a, const D: usize> Walls<'a, D> {
+    /// The settings' walls, with `faces` if built.
+    pub fn of(settings: &'a ViscousSettings, faces: Option<&'a WallFaces<D>>) -> Self {
+        Self {
+            surface_m: settings.wall_surface_m,
+            slip: &settings.slip_walls,
+            faces,
+        }
+    }
+
+    /// Walls that carry their own velocity (no frame, no slip, no faces).
+    pub fn own_velocity() -> Self {
+        Self {
+            surface_m: None,
+            slip: &[],
+            faces: None,
+        }
+    }
+}
+
 /// The walls a fluid particle's pair terms see: the no-slip frame (`wall_surface_m`) of the
 /// walls that do not slip, and the frame of the slip walls.
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct Frames<'a, const D: usize> {
     no_slip: Option<WallFrame<D>>,
     slip: Option<WallFrame<D>>,
+    slip_walls: &'a [SlipWall],
     // Each wall particle's own face for the no-slip walls (`mps.wall_face_normals`).
     faces: Option<&'a WallFaces<D>>,
 }
@@ -75,12 +109,13 @@ impl<'a, const D: usize> Frames<'a, D> {
         nb: &Neighbours,
         i: usize,
         radius_m: f64,
-        wall_surface_m: Option<f64>,
-        slip_walls: &[SlipWall],
-        faces: Option<&'a WallFaces<D>>,
+        walls: &Walls<'a, D>,
     ) -> Self {
+        let slip_walls = walls.slip;
         let plain = |j: usize| slip_wall_of(slip_walls, j).is_none();
-        let no_slip = wall_surface_m.and_then(|s| WallFrame::of(p, nb, i, radius_m, s, plain));
+        let no_slip = walls
+            .surface_m
+            .and_then(|s| WallFrame::of(p, nb, i, radius_m, s, plain));
         let slip = slip_walls.first().and_then(|w| {
             WallFrame::of(p, nb, i, radius_m, w.surface_m, |j| {
                 slip_wall_of(slip_walls, j).is_some()
@@ -89,16 +124,23 @@ impl<'a, const D: usize> Frames<'a, D> {
         Self {
             no_slip,
             slip,
-            faces: faces.filter(|_| wall_surface_m.is_some()),
+            slip_walls,
+            faces: walls.faces.filter(|_| walls.surface_m.is_some()),
         }
+    }
+
+    /// The slip wall that particle j belongs to, if any.
+    #[inline]
+    fn slip_wall(&self, j: usize) -> Option<&SlipWall> {
+        slip_wall_of(self.slip_walls, j)
     }
 
     /// The factor of wall or dummy neighbour entry `e`'s pair term (u_j - u_i) at
     /// displacement r_ij (1 for a wall that carries its own velocity).
     #[inline]
-    pub(crate) fn factor(&self, slip_walls: &[SlipWall], e: u32, r_ij: &Vector<D>) -> f64 {
+    pub(crate) fn factor(&self, e: u32, r_ij: &Vector<D>) -> f64 {
         let j = entry_index(e);
-        if let Some(wall) = slip_wall_of(slip_walls, j)
+        if let Some(wall) = self.slip_wall(j)
             && let Some(f) = &self.slip
         {
             return f.factor(r_ij) * f.gap_m / (f.gap_m + wall.slip_length_m);
@@ -336,28 +378,17 @@ pub struct ViscousStage<const D: usize> {
 ///   rate); the uncorrected d/n0 where M_i is ill-conditioned (a splash).
 /// - `Quadratic`: see [`quadratic_gradient`]; the corrected model where the fit is
 ///   ill-conditioned.
-#[allow(clippy::too_many_arguments)]
 pub fn velocity_gradient<const D: usize>(
     p: &Particles<D>,
     nb: &Neighbours,
     refs: &RefValues,
     i: usize,
     model: StrainRateGradient,
-    wall_surface_m: Option<f64>,
-    slip_walls: &[SlipWall],
-    faces: Option<&WallFaces<D>>,
+    walls: &Walls<'_, D>,
 ) -> SMatrix<f64, D, D> {
-    let frames = Frames::of(
-        p,
-        nb,
-        i,
-        refs.radius_strain_m,
-        wall_surface_m,
-        slip_walls,
-        faces,
-    );
+    let frames = Frames::of(p, nb, i, refs.radius_strain_m, walls);
     if model == StrainRateGradient::Quadratic
-        && let Some(g) = quadratic_gradient(p, nb, refs, i, &frames, slip_walls)
+        && let Some(g) = quadratic_gradient(p, nb, refs, i, &frames)
     {
         return g;
     }
@@ -370,7 +401,7 @@ pub fn velocity_gradient<const D: usize>(
         let du = if p.kind[j] == ParticleKind::Fluid {
             nb.reflect(e, p.velocity_m_s[j]) - ui
         } else {
-            (nb.reflect(e, p.velocity_m_s[j]) - ui) * frames.factor(slip_walls, e, &r)
+            (nb.reflect(e, p.velocity_m_s[j]) - ui) * frames.factor(e, &r)
         };
         g += du * (r.transpose() * (w / r2));
         if corrected {
@@ -402,7 +433,6 @@ fn quadratic_gradient<const D: usize>(
     refs: &RefValues,
     i: usize,
     frames: &Frames<'_, D>,
-    slip_walls: &[SlipWall],
 ) -> Option<SMatrix<f64, D, D>> {
     let frame = frames.no_slip.as_ref();
     let scale = refs.radius_strain_m;
@@ -445,12 +475,12 @@ fn quadratic_gradient<const D: usize>(
         if w == 0.0 {
             continue;
         }
-        if p.kind[j] != ParticleKind::Fluid && slip_wall_of(slip_walls, j).is_some() {
+        if p.kind[j] != ParticleKind::Fluid && frames.slip_wall(j).is_some() {
             // A slip wall enters with the velocity of its slip profile.
             heaviest = heaviest.max(w);
             add(
                 &r,
-                &((nb.reflect(e, p.velocity_m_s[j]) - ui) * frames.factor(slip_walls, e, &r)),
+                &((nb.reflect(e, p.velocity_m_s[j]) - ui) * frames.factor(e, &r)),
                 w,
             );
             continue;
@@ -565,6 +595,7 @@ pub fn predict_velocity<const D: usize>(
         yield_penalty_pa_s: carried_penalty_pa_s,
         wall_faces,
     } = loads;
+    let walls = Walls::of(settings, wall_faces);
     let rho = settings.density_kg_m3;
     let n = p.len();
     let is_fluid = |i: usize| p.kind[i] == ParticleKind::Fluid;
@@ -595,9 +626,7 @@ pub fn predict_velocity<const D: usize>(
                     refs,
                     i,
                     settings.gradient,
-                    settings.wall_surface_m,
-                    &settings.slip_walls,
-                    wall_faces,
+                    &walls,
                 ))
             } else {
                 0.0
@@ -675,16 +704,7 @@ pub fn predict_velocity<const D: usize>(
         let mut diag = scale;
         let mut boundary = Vector::<D>::zeros();
         let mut own_image = Vector::<D>::zeros();
-        let slip_walls = &settings.slip_walls;
-        let frames = Frames::of(
-            p,
-            nb,
-            i,
-            radius_visc_m,
-            settings.wall_surface_m,
-            slip_walls,
-            wall_faces,
-        );
+        let frames = Frames::of(p, nb, i, radius_visc_m, &walls);
         for &e in nb.of(i) {
             let j = entry_index(e);
             let r = nb.displacement(&p.position_m, i, e);
@@ -693,7 +713,7 @@ pub fn predict_velocity<const D: usize>(
                 continue;
             }
             if !is_fluid(j) {
-                a *= frames.factor(slip_walls, e, &r);
+                a *= frames.factor(e, &r);
             }
             let c = if divergence_form {
                 let mu_ij = if is_fluid(j) {
@@ -742,16 +762,7 @@ pub fn predict_velocity<const D: usize>(
         })
     };
     if let Some((plastic, yield_stress_pa, yield_settings)) = yield_solve {
-        let op = StrainOperator::build(
-            p,
-            &pairs.near,
-            refs,
-            &rows,
-            &row_of,
-            settings.wall_surface_m,
-            &settings.slip_walls,
-            wall_faces,
-        );
+        let op = StrainOperator::build(p, &pairs.near, refs, &rows, &row_of, &walls);
         let carried = rows
             .iter()
             .map(|&i| {

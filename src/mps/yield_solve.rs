@@ -29,7 +29,7 @@ use super::particles::{ParticleKind, Particles, Vector};
 use super::pressure::SolveReport;
 use super::reduce::{MIN_PARALLEL_LEN, map_particles, max_by, sum_by};
 use super::sparse::CsrMatrix;
-use super::viscosity::{Frames, SlipWall, WallFaces};
+use super::viscosity::{Frames, Walls};
 use nalgebra::SMatrix;
 use rayon::prelude::*;
 
@@ -86,22 +86,19 @@ impl<const D: usize> StrainOperator<D> {
     /// the neighbours within the strain rate's radius: G_i = sum_j (u_j - u_i) b_ij^T,
     /// b_ij = M_i^-1 r_ij w_ij / r_ij^2; a wall or dummy neighbour carries its own velocity times the frame's
     /// factor (as in `velocity_gradient`), which goes to e0.
-    #[allow(clippy::too_many_arguments)]
     pub(crate) fn build(
         p: &Particles<D>,
         nb: &Neighbours,
         refs: &RefValues,
         rows: &[usize],
         row_of: &[u32],
-        wall_surface_m: Option<f64>,
-        slip_walls: &[SlipWall],
-        faces: Option<&WallFaces<D>>,
+        walls: &Walls<'_, D>,
     ) -> Self {
         type Row<const D: usize> = (Vec<(u32, Vector<D>)>, Tensor<D>);
         let per_row: Vec<Row<D>> = map_particles(rows.len(), |k| {
             let i = rows[k];
             let radius = refs.radius_strain_m;
-            let frames = Frames::of(p, nb, i, radius, wall_surface_m, slip_walls, faces);
+            let frames = Frames::of(p, nb, i, radius, walls);
             let m = moment_matrix(&p.position_m, nb, i, radius);
             let c = gradient_correction(&m, refs.n0_strain, MIN_DET_RATIO);
             let mut entries = Vec::new();
@@ -116,7 +113,7 @@ impl<const D: usize> StrainOperator<D> {
                     entries.push((row_of[j] | Neighbours::plane_bits(e), b));
                     own -= b;
                 } else {
-                    let f = frames.factor(slip_walls, e, &r);
+                    let f = frames.factor(e, &r);
                     constant += nb.reflect(e, p.velocity_m_s[j]) * (b * f).transpose();
                     own -= b * f;
                 }

@@ -443,7 +443,7 @@ fn pressure_regularisation_keeps_a_3d_tank_still_inside_its_radius_limit() {
 fn corrected_velocity_gradient_is_exact_up_to_the_free_surface() {
     use mps_runner::mps::Particles;
     use mps_runner::mps::kernel::RefValues;
-    use mps_runner::mps::viscosity::{StrainRateGradient, velocity_gradient};
+    use mps_runner::mps::viscosity::{StrainRateGradient, Walls, velocity_gradient};
     let l0 = 0.01;
     let refs = RefValues::on_lattice::<2>(l0, 2.1 * l0, 3.1 * l0);
     let shear = 3.0;
@@ -476,9 +476,7 @@ fn corrected_velocity_gradient_is_exact_up_to_the_free_surface() {
             &refs,
             i,
             StrainRateGradient::Corrected,
-            None,
-            &[],
-            None,
+            &Walls::own_velocity(),
         );
         let plain = velocity_gradient(
             &p,
@@ -486,9 +484,7 @@ fn corrected_velocity_gradient_is_exact_up_to_the_free_surface() {
             &refs,
             i,
             StrainRateGradient::Plain,
-            None,
-            &[],
-            None,
+            &Walls::own_velocity(),
         );
         assert!(
             (corrected[(0, 1)] - shear).abs() < 1e-9 * shear && corrected[(1, 0)].abs() < 1e-9,
@@ -635,7 +631,7 @@ fn wall_face_normals_extrapolate_through_each_face_at_an_edge() {
 #[test]
 fn wall_surface_no_slip_makes_the_shear_exact_next_to_the_floor() {
     use mps_runner::mps::kernel::RefValues;
-    use mps_runner::mps::viscosity::{StrainRateGradient, velocity_gradient};
+    use mps_runner::mps::viscosity::{StrainRateGradient, Walls, velocity_gradient};
     let l0 = 0.01;
     let refs = RefValues::on_lattice::<2>(l0, 2.1 * l0, 3.1 * l0);
     let shear = 2.0;
@@ -662,7 +658,17 @@ fn wall_surface_no_slip_makes_the_shear_exact_next_to_the_floor() {
             StrainRateGradient::Corrected,
             StrainRateGradient::Quadratic,
         ] {
-            let g = velocity_gradient(&p, &nb, &refs, i, model, Some(0.5 * l0), &[], None);
+            let g = velocity_gradient(
+                &p,
+                &nb,
+                &refs,
+                i,
+                model,
+                &Walls {
+                    surface_m: Some(0.5 * l0),
+                    ..Walls::own_velocity()
+                },
+            );
             assert!(
                 (g[(0, 1)] - shear).abs() < 1e-9 * shear && g[(1, 0)].abs() < 1e-9,
                 "du/dy {} at y = {}, expected {shear} ({model:?})",
@@ -683,9 +689,7 @@ fn wall_surface_no_slip_makes_the_shear_exact_next_to_the_floor() {
         &refs,
         bottom,
         StrainRateGradient::Plain,
-        None,
-        &[],
-        None,
+        &Walls::own_velocity(),
     );
     assert!(
         own[(0, 1)] < 0.85 * shear,
@@ -702,7 +706,7 @@ fn wall_surface_no_slip_makes_the_shear_exact_next_to_the_floor() {
 #[test]
 fn quadratic_strain_rate_is_exact_for_a_parabolic_profile_from_floor_to_surface() {
     use mps_runner::mps::kernel::RefValues;
-    use mps_runner::mps::viscosity::{StrainRateGradient, velocity_gradient};
+    use mps_runner::mps::viscosity::{StrainRateGradient, Walls, velocity_gradient};
     let l0 = 0.01;
     let refs = RefValues::on_lattice::<2>(l0, 2.1 * l0, 3.1 * l0);
     let (columns, rows) = (14, 5);
@@ -734,9 +738,11 @@ fn quadratic_strain_rate_is_exact_for_a_parabolic_profile_from_floor_to_surface(
             &refs,
             i,
             StrainRateGradient::Quadratic,
-            Some(0.5 * l0),
-            &[],
-            None,
+            &Walls {
+                surface_m: Some(0.5 * l0),
+
+                ..Walls::own_velocity()
+            },
         );
         assert!(
             (q[(0, 1)] - slope(y)).abs() < 1e-9 * a && q[(1, 0)].abs() < 1e-9 * a,
@@ -750,9 +756,11 @@ fn quadratic_strain_rate_is_exact_for_a_parabolic_profile_from_floor_to_surface(
             &refs,
             i,
             StrainRateGradient::Corrected,
-            Some(0.5 * l0),
-            &[],
-            None,
+            &Walls {
+                surface_m: Some(0.5 * l0),
+
+                ..Walls::own_velocity()
+            },
         );
         worst_corrected = worst_corrected.max((c[(0, 1)] - slope(y)).abs() / a);
     }
@@ -776,7 +784,7 @@ fn quadratic_strain_rate_is_exact_for_a_parabolic_profile_from_floor_to_surface(
 #[test]
 fn a_first_shell_strain_rate_reads_a_thin_plug_as_rigid() {
     use mps_runner::mps::kernel::RefValues;
-    use mps_runner::mps::viscosity::{StrainRateGradient, velocity_gradient};
+    use mps_runner::mps::viscosity::{StrainRateGradient, Walls, velocity_gradient};
     let l0 = 0.01;
     let plug_m_s = 0.05;
     let columns = 14;
@@ -804,9 +812,11 @@ fn a_first_shell_strain_rate_reads_a_thin_plug_as_rigid() {
             refs,
             i,
             StrainRateGradient::Corrected,
-            Some(0.5 * l0),
-            &[],
-            None,
+            &Walls {
+                surface_m: Some(0.5 * l0),
+
+                ..Walls::own_velocity()
+            },
         );
         // A plug along x: only du/dy can be read.
         assert!(g[(0, 0)].abs() < 1e-9 && g[(1, 0)].abs() < 1e-9 && g[(1, 1)].abs() < 1e-9);

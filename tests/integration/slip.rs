@@ -7,8 +7,8 @@
 use mps_runner::mps::grid::{KernelPairs, Neighbours};
 use mps_runner::mps::kernel::RefValues;
 use mps_runner::mps::viscosity::{
-    Loads, SlipWall, StrainRateGradient, ViscousSettings, predict_velocity, strain_invariant,
-    velocity_gradient,
+    Loads, SlipWall, StrainRateGradient, ViscousSettings, Walls, predict_velocity,
+    strain_invariant, velocity_gradient,
 };
 use mps_runner::mps::{ParticleKind, Particles, Rheology, Vector};
 
@@ -114,9 +114,7 @@ fn steady(slip_length_m: Option<f64>) -> Vec<(f64, f64, f64)> {
                 &refs,
                 i,
                 settings.gradient,
-                settings.wall_surface_m,
-                &settings.slip_walls,
-                None,
+                &Walls::of(&settings, None),
             );
             (
                 p.position_m[i][1],
