@@ -92,7 +92,7 @@ impl<'a, const D: usize> Walls<'a, D> {
     }
 }
 
-/// The walls a fluid particle's pair terms see: the no-slip frame (`wall_surface_m`) of the
+/// The walls a fluid particle's pair terms see: the no-slip frame (`Walls::surface_m`) of the
 /// walls that do not slip, and the frame of the slip walls.
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct Frames<'a, const D: usize> {
@@ -371,7 +371,7 @@ pub struct ViscousStage<const D: usize> {
 /// Velocity gradient G_ab = d u_a / d x_b at fluid particle i by the gradient model (eq. 3,
 /// applied to each velocity component as in seed 000 eqs. 12-13); walls and dummies carry
 /// their own velocity, which makes the floor no-slip at their centres, or with
-/// `wall_surface_m` i's velocity extrapolated through the walls' surface ([`WallFrame`]).
+/// `walls.surface_m` i's velocity extrapolated through the walls' surface ([`WallFrame`]).
 /// - `Corrected`: the sum is normalised by the corrective matrix M_i^-1 (Khayyer & Gotoh
 ///   2011) instead of d/n0, which makes it exact for a linear velocity field on a truncated
 ///   stencil (the free surface: the plain model gives a flat surface's top row half the shear
