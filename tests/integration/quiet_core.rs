@@ -12,6 +12,15 @@ use mps_runner::mps::operators::{
 };
 use mps_runner::mps::{ParticleKind, PressureScheme, Solver, SolverConfig, Vector};
 
+/// Walls whose no-slip condition holds at their surface, half a spacing in front of them
+/// (`mps.wall_surface_no_slip`), with no slip bodies or faces.
+fn no_slip_surface<const D: usize>(l0: f64) -> mps_runner::mps::viscosity::Walls<'static, D> {
+    mps_runner::mps::viscosity::Walls {
+        surface_m: Some(0.5 * l0),
+        ..mps_runner::mps::viscosity::Walls::own_velocity()
+    }
+}
+
 /// A fixed pseudo-random sequence in [-1, 1) (64-bit LCG), for a reproducible disorder.
 fn jitter(state: &mut u64) -> f64 {
     *state = state
@@ -658,17 +667,7 @@ fn wall_surface_no_slip_makes_the_shear_exact_next_to_the_floor() {
             StrainRateGradient::Corrected,
             StrainRateGradient::Quadratic,
         ] {
-            let g = velocity_gradient(
-                &p,
-                &nb,
-                &refs,
-                i,
-                model,
-                &Walls {
-                    surface_m: Some(0.5 * l0),
-                    ..Walls::own_velocity()
-                },
-            );
+            let g = velocity_gradient(&p, &nb, &refs, i, model, &no_slip_surface(l0));
             assert!(
                 (g[(0, 1)] - shear).abs() < 1e-9 * shear && g[(1, 0)].abs() < 1e-9,
                 "du/dy {} at y = {}, expected {shear} ({model:?})",
@@ -706,7 +705,7 @@ fn wall_surface_no_slip_makes_the_shear_exact_next_to_the_floor() {
 #[test]
 fn quadratic_strain_rate_is_exact_for_a_parabolic_profile_from_floor_to_surface() {
     use mps_runner::mps::kernel::RefValues;
-    use mps_runner::mps::viscosity::{StrainRateGradient, Walls, velocity_gradient};
+    use mps_runner::mps::viscosity::{StrainRateGradient, velocity_gradient};
     let l0 = 0.01;
     let refs = RefValues::on_lattice::<2>(l0, 2.1 * l0, 3.1 * l0);
     let (columns, rows) = (14, 5);
@@ -738,11 +737,7 @@ fn quadratic_strain_rate_is_exact_for_a_parabolic_profile_from_floor_to_surface(
             &refs,
             i,
             StrainRateGradient::Quadratic,
-            &Walls {
-                surface_m: Some(0.5 * l0),
-
-                ..Walls::own_velocity()
-            },
+            &no_slip_surface(l0),
         );
         assert!(
             (q[(0, 1)] - slope(y)).abs() < 1e-9 * a && q[(1, 0)].abs() < 1e-9 * a,
@@ -756,11 +751,7 @@ fn quadratic_strain_rate_is_exact_for_a_parabolic_profile_from_floor_to_surface(
             &refs,
             i,
             StrainRateGradient::Corrected,
-            &Walls {
-                surface_m: Some(0.5 * l0),
-
-                ..Walls::own_velocity()
-            },
+            &no_slip_surface(l0),
         );
         worst_corrected = worst_corrected.max((c[(0, 1)] - slope(y)).abs() / a);
     }
@@ -784,7 +775,7 @@ fn quadratic_strain_rate_is_exact_for_a_parabolic_profile_from_floor_to_surface(
 #[test]
 fn a_first_shell_strain_rate_reads_a_thin_plug_as_rigid() {
     use mps_runner::mps::kernel::RefValues;
-    use mps_runner::mps::viscosity::{StrainRateGradient, Walls, velocity_gradient};
+    use mps_runner::mps::viscosity::{StrainRateGradient, velocity_gradient};
     let l0 = 0.01;
     let plug_m_s = 0.05;
     let columns = 14;
@@ -812,11 +803,7 @@ fn a_first_shell_strain_rate_reads_a_thin_plug_as_rigid() {
             refs,
             i,
             StrainRateGradient::Corrected,
-            &Walls {
-                surface_m: Some(0.5 * l0),
-
-                ..Walls::own_velocity()
-            },
+            &no_slip_surface(l0),
         );
         // A plug along x: only du/dy can be read.
         assert!(g[(0, 0)].abs() < 1e-9 && g[(1, 0)].abs() < 1e-9 && g[(1, 1)].abs() < 1e-9);
