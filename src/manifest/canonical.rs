@@ -105,6 +105,7 @@ pub fn canonical_text<S: SceneSection>(manifest: &Manifest<S>) -> String {
                 "yield_max_iterations",
                 "yield_tolerance_1_s",
                 "yield_penalty_adaptive",
+                "yield_consistent_divergence",
             ] {
                 mps.remove(key);
             }
@@ -120,6 +121,10 @@ pub fn canonical_text<S: SceneSection>(manifest: &Manifest<S>) -> String {
             (
                 "yield_penalty_adaptive",
                 manifest.mps.yield_penalty_adaptive,
+            ),
+            (
+                "yield_consistent_divergence",
+                manifest.mps.yield_consistent_divergence,
             ),
             (
                 "exact_projection",

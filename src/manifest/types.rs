@@ -339,6 +339,12 @@ pub struct Mps {
     /// u steps); 0 = solve to `viscosity_tolerance`, as before.
     #[serde(default)]
     pub yield_velocity_fraction: f64,
+    /// The yield solve's strain operator corrected so that a uniform stress exerts no force on
+    /// an interior particle (`src/mps/yield_solve.rs`, `make_divergence_consistent`; interior:
+    /// all neighbours fluid and a number density of at least `surface_threshold` n0). Off: the
+    /// corrected gradient's adjoint, as before.
+    #[serde(default)]
+    pub yield_consistent_divergence: bool,
     /// Artificial compressibility on the PPE diagonal, in 1/Pa.
     #[serde(default = "default_compressibility_1_pa")]
     pub compressibility_1_pa: f64,
@@ -436,6 +442,7 @@ impl Default for Mps {
             yield_tolerance_1_s: default_yield_tolerance_1_s(),
             yield_penalty_adaptive: false,
             yield_velocity_fraction: 0.0,
+            yield_consistent_divergence: false,
             compressibility_1_pa: default_compressibility_1_pa(),
             collision_distance: default_collision_distance(),
             collision_restitution: default_collision_restitution(),

@@ -338,6 +338,12 @@ pub fn check<S: SceneSection>(m: &Manifest<S>) -> Vec<Issue> {
             "needs mps.yield_penalty_pa_s > 0 (the penalty it starts from)".to_string(),
         );
     }
+    if p.yield_consistent_divergence && p.yield_penalty_pa_s == 0.0 {
+        c.fail(
+            "mps.yield_consistent_divergence",
+            "needs mps.yield_penalty_pa_s > 0 (it corrects the yield solve's operator)".to_string(),
+        );
+    }
     if p.yield_velocity_fraction != 0.0 && p.yield_penalty_pa_s == 0.0 {
         c.fail(
             "mps.yield_velocity_fraction",

@@ -762,7 +762,15 @@ pub fn predict_velocity<const D: usize>(
         })
     };
     if let Some((plastic, yield_stress_pa, yield_settings)) = yield_solve {
-        let op = StrainOperator::build(p, &pairs.near, refs, &rows, &row_of, &walls);
+        let op = StrainOperator::build(
+            p,
+            &pairs.near,
+            refs,
+            &rows,
+            &row_of,
+            &walls,
+            yield_settings.consistent_divergence,
+        );
         let carried = rows
             .iter()
             .map(|&i| {

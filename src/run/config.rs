@@ -57,6 +57,10 @@ pub fn solver_config<const D: usize>(m: &Manifest, scene: &Scene<D>) -> SolverCo
             tolerance_1_s: m.mps.yield_tolerance_1_s,
             adaptive: m.mps.yield_penalty_adaptive,
             velocity_fraction: m.mps.yield_velocity_fraction,
+            consistent_divergence: m
+                .mps
+                .yield_consistent_divergence
+                .then_some(m.mps.surface_threshold),
         }),
         gravity_m_s2: m.gravity_m_s2,
         gravity_tilt_rad: scene.gravity_tilt_rad,

@@ -281,6 +281,7 @@ const POISEUILLE_SOLVE: YieldSolve = YieldSolve {
     tolerance_1_s: 1e-6,
     adaptive: false,
     velocity_fraction: 0.0,
+    consistent_divergence: None,
 };
 
 /// Bingham's law with a rigid state (`mps.yield_penalty_pa_s`, the augmented Lagrangian of

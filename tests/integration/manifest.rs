@@ -914,6 +914,11 @@ fn invalid_values_are_named_and_located() {
         ok_with(MINIMAL, &["mps.yield_penalty_adaptive=false"]).hash_hex,
         ok_with(MINIMAL, &[]).hash_hex
     );
+    // Nor is the consistent divergence's switch, off; on, it is.
+    assert_eq!(
+        ok_with(MINIMAL, &["mps.yield_consistent_divergence=false"]).hash_hex,
+        ok_with(MINIMAL, &[]).hash_hex
+    );
     // Nor are exact velocity steps in the yield solve (the inexact ones' fraction at 0).
     let yield_solve = [
         "mps.yield_penalty_pa_s=1000",
@@ -932,6 +937,14 @@ fn invalid_values_are_named_and_located() {
         inexact
             .canonical
             .contains(r#""yield_velocity_fraction":0.1"#)
+    );
+    sets.push("mps.yield_consistent_divergence=true");
+    let consistent = ok_with(&heap, &sets);
+    assert_ne!(consistent.hash_hex, inexact.hash_hex);
+    assert!(
+        consistent
+            .canonical
+            .contains(r#""yield_consistent_divergence":true"#)
     );
 
     // from an override: no line, says so

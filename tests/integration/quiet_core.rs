@@ -899,6 +899,7 @@ fn checkerboard_left(smoothing_s: f64) -> (f64, f64) {
         tolerance_1_s: 1e-3,
         adaptive: true,
         velocity_fraction: 0.1,
+        consistent_divergence: None,
     });
     cfg.wall_surface_no_slip = true;
     cfg.pressure_scheme = PressureScheme::Incremental;
