@@ -59,7 +59,8 @@ pub struct YieldSolve {
     /// With `Some(ratio)`, the strain operator is corrected so that its adjoint (the force
     /// -E^T lambda) is zero for a uniform lambda at every interior particle: one whose
     /// neighbours within the strain radius are all fluid unknowns and whose number density
-    /// (the gradient's radius) is at least `ratio` n0 (see [`StrainOperator::build`]). `None`: the operator as built.
+    /// (the gradient's radius) is at least `ratio` n0 (see [`StrainOperator::build`]).
+    /// `None`: the operator as built.
     pub consistent_divergence: Option<f64>,
 }
 
@@ -112,13 +113,13 @@ impl<const D: usize> StrainOperator<D> {
             let mut entries = Vec::new();
             let mut own = Vector::<D>::zeros();
             let mut constant = Tensor::<D>::zeros();
-            let mut geometry = consistent_divergence.map(|_| (Vec::new(), 0.0, true));
+            let mut geometry = consistent_divergence.map(|_| (Vec::new(), true));
             for (e, r, r2, w) in weighted_neighbours(&p.position_m, nb, i, radius) {
                 let j = entry_index(e);
                 // M_i is symmetric: b^T = r^T M^-1 w / r^2.
                 let b = c.transpose() * r * (w / r2);
                 let unknown = p.kind[j] == ParticleKind::Fluid && row_of[j] != u32::MAX;
-                if let Some((pairs, _, all_unknown)) = &mut geometry {
+                if let Some((pairs, all_unknown)) = &mut geometry {
                     *all_unknown &= unknown && Neighbours::plane_bits(e) == 0;
                     if unknown {
                         pairs.push((r, w / r2));
@@ -135,7 +136,7 @@ impl<const D: usize> StrainOperator<D> {
                 }
             }
             entries.push((k as u32, own));
-            let geometry = geometry.map(|(pairs, _, all_unknown)| {
+            let geometry = geometry.map(|(pairs, all_unknown)| {
                 // The free surface's rule (number density with the gradient's radius).
                 let density: f64 = weighted_neighbours(&p.position_m, nb, i, refs.radius_n_m)
                     .map(|(_, _, _, w)| w)
@@ -234,8 +235,8 @@ impl<const D: usize> StrainOperator<D> {
 }
 
 /// One row of the strain operator as built: its entries (the last is the row's own), e0, and
-/// with the consistent divergence each unknown entry's (r_ij, w_ij / r_ij^2) and whether the row is
-/// interior.
+/// with the consistent divergence each unknown entry's (r_ij, w_ij / r_ij^2) and whether the
+/// row is interior.
 type Row<const D: usize> = (
     Vec<(u32, Vector<D>)>,
     Tensor<D>,
@@ -366,19 +367,25 @@ fn make_divergence_consistent<const D: usize>(per_row: &mut [Row<D>], n0: f64) -
         };
         [if d > 0.0 { 1.0 / d } else { 1.0 }; D]
     });
-    // The column sums to remove: -s_c per interior c.
-    let rhs: Vec<[f64; D]> = map_particles(n, |c| {
-        if !interior[c] {
-            return [0.0; D];
+    // The column sums to remove, -s_c per interior c, over every entry (those of rows left as
+    // built too), in row order.
+    let mut sums = vec![Vector::<D>::zeros(); n];
+    for (list, _, _) in per_row.iter() {
+        for (c, a) in list {
+            if Neighbours::plane_bits(*c) == 0 {
+                sums[entry_index(*c)] += a;
+            }
         }
-        let list = &per_row[c].0;
-        let mut s = list[list.len() - 1].1;
-        for &e in &by_column[column_start[c]..column_start[c + 1]] {
-            let (k, _, position, _, _) = entries[e as usize];
-            s += per_row[k as usize].0[position as usize].1;
-        }
-        (-s).into()
-    });
+    }
+    let rhs: Vec<[f64; D]> = (0..n)
+        .map(|c| {
+            if interior[c] {
+                (-sums[c]).into()
+            } else {
+                [0.0; D]
+            }
+        })
+        .collect();
     let mut mu = vec![[0.0; D]; n];
     let report = conjugate_gradient(
         apply,
