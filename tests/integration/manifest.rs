@@ -930,22 +930,28 @@ fn invalid_values_are_named_and_located() {
     let mut sets = yield_solve.to_vec();
     sets.push("mps.yield_velocity_fraction=0");
     assert_eq!(ok_with(&heap, &sets).hash_hex, exact.hash_hex);
-    sets.push("mps.yield_velocity_fraction=0.1");
-    let inexact = ok_with(&heap, &sets);
-    assert_ne!(inexact.hash_hex, exact.hash_hex);
-    assert!(
-        inexact
-            .canonical
-            .contains(r#""yield_velocity_fraction":0.1"#)
-    );
-    sets.push("mps.yield_consistent_divergence=true");
-    let consistent = ok_with(&heap, &sets);
-    assert_ne!(consistent.hash_hex, inexact.hash_hex);
-    assert!(
-        consistent
-            .canonical
-            .contains(r#""yield_consistent_divergence":true"#)
-    );
+    // Inexact steps, then the consistent divergence, on top: each changes the hash and is
+    // named in the canonical form.
+    for (set, named) in [
+        (
+            "mps.yield_velocity_fraction=0.1",
+            r#""yield_velocity_fraction":0.1"#,
+        ),
+        (
+            "mps.yield_consistent_divergence=true",
+            r#""yield_consistent_divergence":true"#,
+        ),
+    ] {
+        let before = ok_with(&heap, &sets).hash_hex;
+        sets.push(set);
+        let after = ok_with(&heap, &sets);
+        assert_ne!(after.hash_hex, before, "{set}");
+        assert!(
+            after.canonical.contains(named),
+            "{set}: {}",
+            after.canonical
+        );
+    }
 
     // from an override: no line, says so
     let e = err_with(MINIMAL, &["time.courant=1.5"]);
