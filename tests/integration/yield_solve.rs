@@ -140,8 +140,8 @@ fn an_adaptive_penalty_brings_the_heap_to_rest_and_replays_from_its_checkpoints(
 /// uniform stress"): stopped at 2.23 s at 0.983 m (3.18 s, 0.973 m from a build that summed
 /// the column sums in another order: the heap is chaotic in round-off), where without it
 /// 2.27 s and 1.016 m; at
-/// this coarse spacing the last 0.5-1 % of the particles keeps moving at 0.2-4 mm/s (the
-/// adjoint's heap reaches 100 % non-flowing at 2.4 s), so no speed limit is asserted here.
+/// this coarse spacing one round-off twin kept its last 0.5-1 % moving at 0.2-4 mm/s (the
+/// others reach 100 % non-flowing by 2.3 s), so no speed limit is asserted here.
 #[test]
 fn a_consistent_divergence_stops_the_heap_on_any_thread_count() {
     let dir = tempfile::tempdir().unwrap();
