@@ -25,7 +25,7 @@
 use super::grid::{Neighbours, entry_index};
 use super::kernel::RefValues;
 use super::operators::{
-    MIN_DET_RATIO, gradient_correction, moment_matrix, weighted_neighbours,
+    MIN_DET_RATIO, gradient_correction, moment_matrix, number_density, weighted_neighbours,
     well_conditioned_inverse,
 };
 use super::particles::{ParticleKind, Particles, Vector};
@@ -138,9 +138,7 @@ impl<const D: usize> StrainOperator<D> {
             entries.push((k as u32, own));
             let geometry = geometry.map(|(pairs, all_unknown)| {
                 // The free surface's rule (number density with the gradient's radius).
-                let density: f64 = weighted_neighbours(&p.position_m, nb, i, refs.radius_n_m)
-                    .map(|(_, _, _, w)| w)
-                    .sum();
+                let density = number_density(&p.position_m, nb, i, refs.radius_n_m, |_| true);
                 let ratio = consistent_divergence.unwrap_or(1.0);
                 (pairs, all_unknown && density >= ratio * refs.n0)
             });
@@ -156,7 +154,7 @@ impl<const D: usize> StrainOperator<D> {
             columns: Vec::new(),
             coefficients: Vec::new(),
             constant: Vec::with_capacity(rows.len()),
-            t_offsets: vec![0; rows.len() + 1],
+            t_offsets: Vec::new(),
             t_rows: Vec::new(),
             t_coefficients: Vec::new(),
         };
@@ -165,24 +163,21 @@ impl<const D: usize> StrainOperator<D> {
             for (c, a) in entries {
                 op.columns.push(c);
                 op.coefficients.push(a);
-                op.t_offsets[entry_index(c) + 1] += 1;
             }
             op.offsets.push(op.columns.len());
             op.constant.push(constant);
         }
-        for k in 0..rows.len() {
-            op.t_offsets[k + 1] += op.t_offsets[k];
-        }
-        let mut fill = op.t_offsets.clone();
+        let slot;
+        (op.t_offsets, slot) = column_order(rows.len(), op.columns.iter().map(|&c| entry_index(c)));
         op.t_rows = vec![0; op.columns.len()];
         op.t_coefficients = vec![Vector::<D>::zeros(); op.columns.len()];
-        for k in 0..rows.len() {
-            for e in op.offsets[k]..op.offsets[k + 1] {
-                let c = entry_index(op.columns[e]);
-                op.t_rows[fill[c]] = k as u32 | Neighbours::plane_bits(op.columns[e]);
-                op.t_coefficients[fill[c]] = op.coefficients[e];
-                fill[c] += 1;
+        let mut k = 0;
+        for (e, &slot) in slot.iter().enumerate() {
+            while e >= op.offsets[k + 1] {
+                k += 1;
             }
+            op.t_rows[slot] = k as u32 | Neighbours::plane_bits(op.columns[e]);
+            op.t_coefficients[slot] = op.coefficients[e];
         }
         op
     }
@@ -232,6 +227,30 @@ impl<const D: usize> StrainOperator<D> {
             d
         })
     }
+}
+
+/// The transpose of a list of entries by their columns (counting sort): the columns' starts
+/// (n + 1 of them) and each entry's slot in column order, entries of one column in list
+/// order (a fixed order, whatever the thread count).
+fn column_order(
+    n: usize,
+    columns: impl Iterator<Item = usize> + Clone,
+) -> (Vec<usize>, Vec<usize>) {
+    let mut starts = vec![0usize; n + 1];
+    for c in columns.clone() {
+        starts[c + 1] += 1;
+    }
+    for c in 0..n {
+        starts[c + 1] += starts[c];
+    }
+    let mut fill = starts.clone();
+    let slot = columns
+        .map(|c| {
+            fill[c] += 1;
+            fill[c] - 1
+        })
+        .collect();
+    (starts, slot)
 }
 
 /// One row of the strain operator as built: its entries (the last is the row's own), e0, and
@@ -299,18 +318,10 @@ fn make_divergence_consistent<const D: usize>(per_row: &mut [Row<D>], n0: f64) -
     }
     row_start.push(entries.len());
     // Per column, its entries in entry order (the transpose; a fixed order).
-    let mut column_start = vec![0usize; n + 1];
-    for e in &entries {
-        column_start[e.1 as usize + 1] += 1;
-    }
-    for c in 0..n {
-        column_start[c + 1] += column_start[c];
-    }
-    let mut fill = column_start.clone();
+    let (column_start, slot) = column_order(n, entries.iter().map(|e| e.1 as usize));
     let mut by_column = vec![0u32; entries.len()];
-    for (index, e) in entries.iter().enumerate() {
-        by_column[fill[e.1 as usize]] = index as u32;
-        fill[e.1 as usize] += 1;
+    for (index, &slot) in slot.iter().enumerate() {
+        by_column[slot] = index as u32;
     }
     let value = |mu: &[[f64; D]], c: usize| {
         if interior[c] {
