@@ -167,17 +167,16 @@ impl<const D: usize> StrainOperator<D> {
             op.offsets.push(op.columns.len());
             op.constant.push(constant);
         }
-        let slot;
-        (op.t_offsets, slot) = column_order(rows.len(), op.columns.iter().map(|&c| entry_index(c)));
+        let (t_offsets, slot) =
+            column_order(rows.len(), op.columns.iter().map(|&c| entry_index(c)));
+        op.t_offsets = t_offsets;
         op.t_rows = vec![0; op.columns.len()];
         op.t_coefficients = vec![Vector::<D>::zeros(); op.columns.len()];
-        let mut k = 0;
-        for (e, &slot) in slot.iter().enumerate() {
-            while e >= op.offsets[k + 1] {
-                k += 1;
+        for k in 0..rows.len() {
+            for e in op.offsets[k]..op.offsets[k + 1] {
+                op.t_rows[slot[e]] = k as u32 | Neighbours::plane_bits(op.columns[e]);
+                op.t_coefficients[slot[e]] = op.coefficients[e];
             }
-            op.t_rows[slot] = k as u32 | Neighbours::plane_bits(op.columns[e]);
-            op.t_coefficients[slot] = op.coefficients[e];
         }
         op
     }
