@@ -173,9 +173,10 @@ impl<const D: usize> StrainOperator<D> {
         op.t_rows = vec![0; op.columns.len()];
         op.t_coefficients = vec![Vector::<D>::zeros(); op.columns.len()];
         for k in 0..rows.len() {
-            for e in op.offsets[k]..op.offsets[k + 1] {
-                op.t_rows[slot[e]] = k as u32 | Neighbours::plane_bits(op.columns[e]);
-                op.t_coefficients[slot[e]] = op.coefficients[e];
+            let row = op.offsets[k]..op.offsets[k + 1];
+            for (e, &s) in row.clone().zip(&slot[row]) {
+                op.t_rows[s] = k as u32 | Neighbours::plane_bits(op.columns[e]);
+                op.t_coefficients[s] = op.coefficients[e];
             }
         }
         op
