@@ -155,19 +155,19 @@ fn quiet_scheme_heap_follows_full_bingham_computation() {
 #[test]
 #[ignore = "needs the Python venv; tools/test.sh runs it"]
 fn thin_layer_check_reads_a_heap_and_rests_at_its_closed_form() {
-    let python = common::python();
-    let tool = common::root().join("tools/heap_lubrication.py");
-    let out = std::process::Command::new(&python)
-        .arg(&tool)
-        .arg("--self-test")
-        .output()
-        .unwrap();
-    let text = String::from_utf8_lossy(&out.stdout).to_string();
-    assert!(
-        out.status.success(),
-        "{text}{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    // The tool's stdout with these arguments; fails the test when it fails.
+    let tool = |args: &[&std::ffi::OsStr]| -> String {
+        let out = std::process::Command::new(common::python())
+            .arg(common::root().join("tools/heap_lubrication.py"))
+            .args(args)
+            .output()
+            .unwrap();
+        let text = String::from_utf8_lossy(&out.stdout).to_string();
+        let errors = String::from_utf8_lossy(&out.stderr);
+        assert!(out.status.success(), "{text}{errors}");
+        text
+    };
+    tool(&["--self-test".as_ref()]);
 
     let dir = tempfile::tempdir().unwrap();
     let resolved = common::resolve(
@@ -175,18 +175,13 @@ fn thin_layer_check_reads_a_heap_and_rests_at_its_closed_form() {
         &["spacing_m=0.02", "time.end_s=1.5"],
     );
     let result = common::run_in(&resolved, dir.path(), 2);
-    let out = std::process::Command::new(&python)
-        .arg(&tool)
-        .arg(&result.path)
-        .args(["--from-s", "1", "--every-s", "0.5"])
-        .output()
-        .unwrap();
-    let text = String::from_utf8_lossy(&out.stdout).to_string();
-    assert!(
-        out.status.success(),
-        "{text}{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let text = tool(&[
+        result.path.as_ref(),
+        "--from-s".as_ref(),
+        "1".as_ref(),
+        "--every-s".as_ref(),
+        "0.5".as_ref(),
+    ]);
     eprintln!("{text}");
     // The run's heap length at 1 s (its farthest particle + l0/2) and the model's body at 1 s
     // (the first empty 20 mm column): the same end within a column.
