@@ -78,13 +78,17 @@ def surface(pc, l0, axisymmetric, copies):
     # A ring at the axis that holds no particle centre (they lie off the axis) is no hole.
     first = min(tops)
     h[:first] = [h[first]] * first
-    if axisymmetric:
-        held = sum(v * math.pi * ((j + 1) ** 2 - j ** 2) * l0 * l0 for j, v in enumerate(h))
-        own = copies * count * l0 ** 3
-    else:
-        held = sum(h) * l0
-        own = count * l0 * l0
+    own = copies * count * l0 ** 3 if axisymmetric else count * l0 * l0
+    held = amount(h, l0, axisymmetric)
     return [v * own / held for v in h]
+
+
+def amount(h, dx, axisymmetric):
+    """The layer's area (plane, per unit width) or volume (axisymmetric: cell j is the ring
+    from j dx to (j + 1) dx)."""
+    if axisymmetric:
+        return sum(v * math.pi * ((j + 1) ** 2 - j ** 2) * dx * dx for j, v in enumerate(h))
+    return sum(h) * dx
 
 
 def front(h, dx):
@@ -132,11 +136,9 @@ def step(h, dx, rho_g, tau, mu, t_end, axisymmetric):
 def rest_front(h, dx, k, axisymmetric):
     """The closed form's front for the model's area (plane) or volume (axisymmetric)."""
     if axisymmetric:
-        volume = sum(v * math.pi * ((j + 1) ** 2 - j ** 2) * dx * dx for j, v in enumerate(h))
         # V = 2 pi int_0^R sqrt(2 k (R - r)) r dr = (8 pi / 15) sqrt(2 k) R^(5/2).
-        return (15.0 * volume / (8.0 * math.pi * math.sqrt(2.0 * k))) ** 0.4
-    area = sum(h) * dx
-    return (1.5 * area) ** (2 / 3) / (2 * k) ** (1 / 3)
+        return (15.0 * amount(h, dx, True) / (8.0 * math.pi * math.sqrt(2.0 * k))) ** 0.4
+    return (1.5 * amount(h, dx, False)) ** (2 / 3) / (2 * k) ** (1 / 3)
 
 
 def self_test():
@@ -147,17 +149,13 @@ def self_test():
     k = tau / rho_g
     for axisymmetric in (False, True):
         h = [0.1] * 40 + [0.0] * 160
-
-        def volume(h):
-            return sum(v * (math.pi * ((j + 1) ** 2 - j ** 2) * dx * dx if axisymmetric else dx)
-                       for j, v in enumerate(h))
-        start = volume(h)
+        start = amount(h, dx, axisymmetric)
         for _ in range(60):
             h, u_max = step(h, dx, rho_g, tau, mu, 1.0, axisymmetric)
             if u_max < 1e-4:
                 break
         end, closed = front(h, dx), rest_front(h, dx, k, axisymmetric)
-        drift = abs(volume(h) / start - 1.0)
+        drift = abs(amount(h, dx, axisymmetric) / start - 1.0)
         name = "axisymmetric" if axisymmetric else "plane"
         print(f"{name}: front {end:.3f} m, closed form {closed:.4f} m, surface speed "
               f"{1000 * u_max:.3g} mm/s, volume drift {drift:.1e}")
@@ -225,9 +223,8 @@ def main():
     print(f"# thin layer at rest (surface speed < {1000 * a.rest_m_s:g} mm/s): "
           + (f"by {rest_s:.1f} s" if rest_s is not None else f"not by {t:.1f} s"))
     k = tau / rho_g
-    print(f"# thin layer's front at {t:.1f} s: {front(h, dx):.4f} m (at {t0:.1f} s: {base:.4f} m);"
-          f" closed-form "
-          f"rest front for its {'volume' if axisymmetric else 'area'}: "
+    print(f"# thin layer's front at {t:.1f} s: {front(h, dx):.4f} m (at {t0:.1f} s: {base:.4f} m); "
+          f"closed-form rest front for its {'volume' if axisymmetric else 'area'}: "
           f"{rest_front(h, dx, k, axisymmetric):.4f} m")
 
 
