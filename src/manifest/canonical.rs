@@ -43,6 +43,11 @@ pub fn normalise_negative_zero(value: &mut Value) {
 pub fn canonical_text<S: SceneSection>(manifest: &Manifest<S>) -> String {
     let mut value = serde_json::to_value(manifest).expect("a manifest always serializes to JSON");
     normalise_negative_zero(&mut value);
+    // A preset is resolved into its fields before the manifest is typed (`preset::resolve`);
+    // the key itself never reaches the canonical form.
+    if let Some(mps) = value.get_mut("mps").and_then(Value::as_object_mut) {
+        mps.remove("preset");
+    }
     if manifest.mps.ppe_preconditioner == PpePreconditioner::Jacobi
         && let Some(mps) = value.get_mut("mps").and_then(Value::as_object_mut)
     {

@@ -8,10 +8,12 @@
 //!    [`ManifestError::Syntax`] with line, column and, where it can be found, the field path);
 //! 2. the manifest (defaults filled in) becomes a `serde_json::Value`; each override is
 //!    applied to it in order ([`ManifestError::Override`] on unknown keys and bad values);
-//! 3. `-0.0` is normalised and the value is turned back into a typed [`Manifest`];
-//! 4. every field is validated ([`ManifestError::Invalid`], located in the source when the
+//! 3. `mps.preset` is resolved into the fields it names (see [`preset`] for which setting
+//!    wins where);
+//! 4. `-0.0` is normalised and the value is turned back into a typed [`Manifest`];
+//! 5. every field is validated ([`ManifestError::Invalid`], located in the source when the
 //!    value was written there);
-//! 5. the canonical text and its SHA-256 are computed (see [`canonical`]).
+//! 6. the canonical text and its SHA-256 are computed (see [`canonical`]).
 
 pub mod boundaries;
 pub mod canonical;
@@ -19,6 +21,7 @@ pub mod checker;
 mod error;
 pub mod locate;
 mod overrides;
+pub mod preset;
 pub mod shape;
 pub mod sweep;
 mod types;
@@ -28,6 +31,7 @@ use std::collections::BTreeSet;
 use std::path::Path;
 
 pub use error::{ManifestError, Result};
+pub use preset::PresetName;
 pub use types::{
     Fluid, Manifest, Mps, Output, PpePreconditioner, PpeSource, PressureSchemeName, SceneSection,
     Stop, Time,
@@ -99,12 +103,15 @@ pub fn from_str<S: SceneSection>(
     for raw in overrides {
         overrides::apply::<S>(&mut value, raw, &mut touched)?;
     }
+    let preset_filled = preset::resolve(&mut value, &map, &touched)?;
     canonical::normalise_negative_zero(&mut value);
     let manifest = rebuild(&value, overrides)?;
 
     if let Some(issue) = validate::check(&manifest).into_iter().next() {
         let (pos, origin) = if touched.is_set(&issue.field) {
             (None, " (from --set)")
+        } else if preset_filled.contains(&issue.field) {
+            (None, " (from mps.preset)")
         } else if touched.is_reset(&issue.field) {
             (None, " (default)")
         } else {
@@ -113,12 +120,13 @@ pub fn from_str<S: SceneSection>(
                 None => (None, " (default)"),
             }
         };
+        let note = preset_note(&issue, &preset_filled);
         return Err(ManifestError::Invalid {
             source_name: source_name.to_string(),
             field: issue.field,
             line: pos.map(|p| p.line),
             column: pos.map(|p| p.column),
-            message: format!("{}{origin}", issue.message),
+            message: format!("{}{origin}{note}", issue.message),
         });
     }
 
@@ -131,6 +139,20 @@ pub fn from_str<S: SceneSection>(
         canonical,
         hash_hex,
     })
+}
+
+/// Names the preset's fields that a validation message mentions but the user did not write.
+fn preset_note(issue: &checker::Issue, filled: &BTreeSet<String>) -> String {
+    let named: Vec<&str> = filled
+        .iter()
+        .filter(|p| **p != issue.field && issue.message.contains(p.as_str()))
+        .map(String::as_str)
+        .collect();
+    if named.is_empty() {
+        String::new()
+    } else {
+        format!("; {} set by mps.preset", named.join(", "))
+    }
 }
 
 /// serde-saphyr options: the defaults (duplicate keys rejected, alias/size budget on), with

@@ -12,6 +12,7 @@ use serde::{Deserialize, Serialize};
 
 use super::boundaries::Boundaries;
 use super::checker::Checker;
+use super::preset::PresetName;
 
 /// A complete experiment description.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -196,6 +197,15 @@ pub struct Mps {
     /// `mixed` (Tanaka & Masunaga 2010: velocity divergence plus relaxed density error).
     #[serde(default = "default_source_term")]
     pub source_term: PpeSource,
+    /// One switch for a whole set of the fields below: `quiet` (the quiet core: the
+    /// incremental scheme with its stabilisers, and for a fluid with a yield stress the rigid
+    /// state by the augmented Lagrangian; docs/validation.md, "Holding still") or `standard`
+    /// (those fields at their defaults). null = none. A field written beside the preset
+    /// wins over it in the same place (the file, or `--set`); a preset set by `--set` wins
+    /// over the file's fields. Resolved into the fields before validation and left out of
+    /// the canonical form (`src/manifest/preset.rs` lists its values).
+    #[serde(default)]
+    pub preset: Option<PresetName>,
     /// How pressure is found and applied: `standard` (Koshizuka & Oka: the PPE gives the whole
     /// pressure from `source_term`, gradient with p_j - p_min; files written before the choice
     /// existed used it) or `incremental` (the pressure is carried between steps and the PPE
@@ -417,6 +427,7 @@ impl Default for Mps {
             surface_threshold: default_surface_threshold(),
             relaxation_coefficient: default_relaxation_coefficient(),
             source_term: default_source_term(),
+            preset: None,
             pressure_scheme: PressureSchemeName::default(),
             compression_relaxation: default_compression_relaxation(),
             pair_stabilisation: 0.0,

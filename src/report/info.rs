@@ -38,8 +38,8 @@ pub struct RunInfo {
     /// `mps.pressure_scheme` of the stored manifest (`standard` when the canonical form leaves
     /// it out, as it does for that default), followed by `, mps.KEY VALUE` for each of the
     /// scheme's stabilisers and switches the run had on (the canonical form holds them only
-    /// then), e.g. `, mps.pair_stabilisation 0.8, mps.exact_projection true`; `None` without a
-    /// readable manifest.
+    /// then), e.g. `, mps.pair_stabilisation 0.8, mps.exact_projection true`, and ` (= mps.preset
+    /// quiet)` when those are exactly the quiet preset's; `None` without a readable manifest.
     pub pressure_scheme: Option<String>,
     /// The `build` metadata: crate_version, git_commit, rustc, target, profile.
     pub build: BTreeMap<String, String>,
@@ -241,6 +241,9 @@ pub fn run_info(path: &Path, size_bytes: u64, run: &RunFile) -> RunInfo {
             {
                 text.push_str(&format!(", mps.compressibility_1_pa {v:e}"));
             }
+            if is_quiet_preset(run) {
+                text.push_str(" (= mps.preset quiet)");
+            }
             text
         }),
         build: run.metadata.get(META_BUILD).cloned().unwrap_or_default(),
@@ -393,5 +396,19 @@ impl fmt::Display for RunInfo {
             writeln!(f, "  {k:<width$}  {v}")?;
         }
         Ok(())
+    }
+}
+
+/// Whether the run's manifest holds exactly the quiet preset's fields: setting the preset on
+/// its stored canonical form leaves the experiment as it was.
+fn is_quiet_preset(run: &RunFile) -> bool {
+    let Some(canonical) = run.manifest_field("canonical") else {
+        return false;
+    };
+    let resolve = |sets: &[String]| crate::experiment::from_str(canonical, "canonical", sets);
+    let preset = format!("mps.preset={}", crate::manifest::PresetName::Quiet.name());
+    match (resolve(&[]), resolve(&[preset])) {
+        (Ok(stored), Ok(quiet)) => stored.hash_hex == quiet.hash_hex,
+        _ => false,
     }
 }

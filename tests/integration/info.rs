@@ -172,6 +172,32 @@ fn info_names_the_quiet_schemes_switches_and_a_compressibility_off_its_default()
 }
 
 #[test]
+fn info_says_when_a_run_used_the_quiet_preset() {
+    let dir = tempfile::tempdir().unwrap();
+    let sets = ["time.end_s=0.005", "mps.preset=quiet"];
+    let path = common::run_completed(&common::resolve("smoke_2d.yaml", &sets), dir.path(), 1).path;
+    let (code, text, _) = runner(&["info".as_ref(), path.as_os_str()]);
+    assert_eq!(code, Some(0), "{text}");
+    let scheme = text.lines().find(|l| l.starts_with("scheme ")).unwrap();
+    assert!(scheme.starts_with("scheme       mps.pressure_scheme incremental, "));
+    assert!(scheme.ends_with(" (= mps.preset quiet)"), "{scheme}");
+    // One field off the preset: the fields are listed, the preset is not claimed.
+    let sets = [
+        "time.end_s=0.005",
+        "mps.preset=quiet",
+        "mps.wall_support=0.9",
+    ];
+    let dir2 = tempfile::tempdir().unwrap();
+    let path = common::run_completed(&common::resolve("smoke_2d.yaml", &sets), dir2.path(), 1).path;
+    let (_, text, _) = runner(&["info".as_ref(), path.as_os_str()]);
+    let scheme = text.lines().find(|l| l.starts_with("scheme ")).unwrap();
+    assert!(
+        scheme.contains("mps.wall_support 0.9") && !scheme.contains("preset"),
+        "{scheme}"
+    );
+}
+
+#[test]
 fn export_of_a_run_as_csv_and_json() {
     let dir = tempfile::tempdir().unwrap();
     let path = smoke(dir.path());

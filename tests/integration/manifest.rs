@@ -1283,3 +1283,139 @@ fn the_quarter_slump_is_part_of_the_experiment_only_when_set() {
     assert!(quarter.canonical.contains("\"quarter_domain\":true"));
     assert_ne!(whole.hash_hex, quarter.hash_hex);
 }
+
+// ---------------------------------------------------------------- mps.preset
+
+/// The quiet set as the docs measure it (docs/validation.md, "Holding still"), written out
+/// field by field: every scheme, every dimension.
+const QUIET_ALL: [&str; 5] = [
+    "mps.pressure_scheme=incremental",
+    "mps.pair_stabilisation=0.8",
+    "mps.wall_support=0.95",
+    "mps.surface_depth=0.5",
+    "mps.corrected_strain_rate=true",
+];
+/// What the quiet set adds in 2D.
+const QUIET_2D_ONLY: [&str; 2] = [
+    "mps.pressure_regularisation=1",
+    "mps.compressibility_1_pa=1e-7",
+];
+/// What it adds for a fluid with a yield stress: the rigid state by the augmented Lagrangian.
+const QUIET_YIELD: [&str; 6] = [
+    "fluid.stress_gradient_term=false",
+    "mps.wall_surface_no_slip=true",
+    "mps.strain_rate_radius=1.5",
+    "mps.yield_penalty_pa_s=1000",
+    "mps.yield_penalty_adaptive=true",
+    "mps.yield_velocity_fraction=0.1",
+];
+
+fn load_exp(file: &str, sets: &[&str]) -> Resolved {
+    let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
+    experiment::load(&common::experiment(file), &sets).unwrap_or_else(|e| panic!("{file}: {e}"))
+}
+
+#[test]
+fn the_quiet_preset_is_its_fields_written_out() {
+    let yield_2d = [&QUIET_ALL[..], &QUIET_2D_ONLY, &QUIET_YIELD].concat();
+    let yield_3d = [&QUIET_ALL[..], &QUIET_YIELD].concat();
+    let water_2d = [&QUIET_ALL[..], &QUIET_2D_ONLY].concat();
+    let water_3d = [
+        "dimension=3",
+        "scene.tank_width_m=0.3",
+        "scene.fill_height_m=0.2",
+    ];
+    for (file, dims, fields) in [
+        ("column_collapse_2d.yaml", &[][..], &yield_2d[..]),
+        ("inclined_layer.yaml", &[], &yield_2d),
+        ("slump_3d.yaml", &[], &yield_3d),
+        ("tank_at_rest.yaml", &[], &water_2d),
+        ("tank_at_rest.yaml", &water_3d, &QUIET_ALL),
+    ] {
+        let by_hand = load_exp(file, &[dims, fields].concat());
+        let preset = load_exp(file, &[dims, &["mps.preset=quiet"]].concat());
+        // The same experiment, so the same canonical form and hash: a file written under the
+        // preset verifies like one written with the fields.
+        assert_eq!(preset.canonical, by_hand.canonical, "{file} {dims:?}");
+        assert_eq!(preset.hash_hex, by_hand.hash_hex);
+        assert!(!preset.canonical.contains("preset"), "{}", preset.canonical);
+        let plain = load_exp(file, dims);
+        assert_ne!(
+            plain.hash_hex, preset.hash_hex,
+            "{file}: the preset changed nothing"
+        );
+        // `standard` takes every field back to its default: the experiment without the set
+        // (the shipped files write no field of it, or its default).
+        let back = load_exp(file, &[dims, fields, &["mps.preset=standard"]].concat());
+        assert_eq!(
+            back.hash_hex, by_hand.hash_hex,
+            "a field set by --set beats the preset"
+        );
+        let standard = load_exp(file, &[dims, &["mps.preset=standard"]].concat());
+        assert_eq!(standard.hash_hex, plain.hash_hex, "{file} {dims:?}");
+    }
+    // Water gets no yield settings (the validation refuses them without a yield stress).
+    let water = load_exp("tank_at_rest.yaml", &["mps.preset=quiet"]).manifest;
+    assert_eq!(water.mps.yield_penalty_pa_s, 0.0);
+    assert!(!water.mps.wall_surface_no_slip);
+}
+
+#[test]
+fn a_field_beats_the_preset_written_beside_it_and_a_preset_set_later_beats_the_file() {
+    let text = edit(
+        FULL,
+        "mps:\n",
+        "mps:\n  preset: quiet\n  pair_stabilisation: 0.7\n",
+    );
+    let r = ok(&text);
+    assert_eq!(r.manifest.mps.pair_stabilisation, 0.7);
+    assert_eq!(r.manifest.mps.wall_support, 0.95);
+    assert_eq!(
+        r.manifest.mps.pressure_scheme,
+        manifest::PressureSchemeName::Incremental
+    );
+    // FULL writes the compressibility (0.45e-9): the file's preset leaves it alone.
+    assert_eq!(r.manifest.mps.compressibility_1_pa, 0.45e-9);
+    // The same preset set by --set switches the file's fields too, but not a --set field.
+    let r = ok_with(FULL, &["mps.pair_stabilisation=0.7", "mps.preset=quiet"]);
+    assert_eq!(r.manifest.mps.pair_stabilisation, 0.7);
+    assert_eq!(r.manifest.mps.compressibility_1_pa, 1e-7);
+    // A preset set by --set over the file's preset wins on every field the file wrote.
+    let r = ok_with(&text, &["mps.preset=standard"]);
+    assert_eq!(r.manifest.mps.pair_stabilisation, 0.0);
+    assert_eq!(
+        r.manifest.mps.pressure_scheme,
+        manifest::PressureSchemeName::Standard
+    );
+    assert_eq!(r.hash_hex, ok(FULL).hash_hex);
+    // Null is no preset.
+    assert_eq!(
+        ok_with(FULL, &["mps.preset=null"]).hash_hex,
+        ok(FULL).hash_hex
+    );
+}
+
+#[test]
+fn a_bad_preset_is_named_and_a_clash_says_what_the_preset_set() {
+    let text = edit(FULL, "mps:\n", "mps:\n  preset: quite\n");
+    let e = err(&text);
+    assert_syntax(
+        &e,
+        "mps.preset",
+        Some(pos_of(&text, "quite", 0)),
+        &["quite", "standard", "quiet"],
+    );
+    let e = err_with(FULL, &["mps.preset=loud"]);
+    assert_override(&e, "mps.preset", &["loud", "`standard` or `quiet`"]);
+    // A Bingham file that keeps eq. 8's term on against the preset's yield solve: the error is
+    // at the user's line and names what the preset set.
+    let text = std::fs::read_to_string(common::experiment("column_collapse_2d.yaml")).unwrap()
+        + "mps:\n  preset: quiet\n";
+    let e = err(&text);
+    assert_invalid(
+        &e,
+        "fluid.stress_gradient_term",
+        Some(pos_of(&text, "stress_gradient_term: true", 22)),
+        &["mps.yield_penalty_pa_s set by mps.preset"],
+    );
+}

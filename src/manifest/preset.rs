@@ -1,0 +1,171 @@
+//! `mps.preset`: one switch for a whole set of scheme fields.
+//!
+//! A preset names values for a fixed list of fields (which ones depend on the dimension and
+//! on whether the fluid has a yield stress). It is resolved before validation and then
+//! dropped: the resolved manifest holds the fields themselves, so a run under a preset has
+//! the canonical form and hash of the same run with those fields written out, and files
+//! written under a preset verify like any other.
+//!
+//! Precedence, strongest first: a field set by `--set`; a preset set by `--set`; a field
+//! written in the file; a preset written in the file; the field's default. So a file may
+//! adjust one field of its preset, and `--set mps.preset=...` on a file switches the whole
+//! set whatever the file wrote.
+
+use std::collections::BTreeSet;
+
+use serde::{Deserialize, Serialize};
+use serde_json::{Value, json};
+
+use super::error::{ManifestError, Result};
+use super::locate::SourceMap;
+use super::overrides::Touched;
+use super::types::Mps;
+
+/// The presets (see [`Mps::preset`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PresetName {
+    /// Every field of the quiet set back at its default: the standard scheme and the
+    /// regularised law.
+    Standard,
+    /// The quiet core (docs/validation.md, "Holding still"): the incremental scheme with its
+    /// stabilisers; in 2D the pressure regularisation and compressibility; for a fluid with
+    /// a yield stress the rigid state by the augmented Lagrangian, with the corrected
+    /// first-shell strain rate and no slip at the walls' surface.
+    Quiet,
+}
+
+impl PresetName {
+    /// The manifest's spelling.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Standard => "standard",
+            Self::Quiet => "quiet",
+        }
+    }
+}
+
+/// Who a preset's values are for.
+#[derive(Debug, Clone, Copy)]
+struct Target {
+    dimension: u64,
+    yield_stress: bool,
+}
+
+/// The quiet set's fields and values for `target`, as dotted paths. Measured in
+/// docs/validation.md: the tanks at rest and the dam break (2D and 3D water), the heap, the
+/// inclined layer and the slump (the yield sets).
+fn quiet_values(target: Target) -> Vec<(&'static str, Value)> {
+    let mut v = vec![
+        ("mps.pressure_scheme", json!("incremental")),
+        ("mps.pair_stabilisation", json!(0.8)),
+        ("mps.wall_support", json!(0.95)),
+        ("mps.surface_depth", json!(0.5)),
+        ("mps.corrected_strain_rate", json!(true)),
+    ];
+    if target.dimension == 2 {
+        // In 3D the first shell of radius 1.5 lets its rows slide (validation refuses it
+        // there); the 3D tank is at rest without it.
+        v.push(("mps.pressure_regularisation", json!(1.0)));
+        // Damps the increment's two-step mode (the rodding at 2.5 mm).
+        v.push(("mps.compressibility_1_pa", json!(1.0e-7)));
+    }
+    if target.yield_stress {
+        v.extend([
+            // The yield solve takes the stress from the multiplier, not from eq. 8's term.
+            ("fluid.stress_gradient_term", json!(false)),
+            ("mps.wall_surface_no_slip", json!(true)),
+            ("mps.strain_rate_radius", json!(1.5)),
+            ("mps.yield_penalty_pa_s", json!(1000.0)),
+            ("mps.yield_penalty_adaptive", json!(true)),
+            ("mps.yield_velocity_fraction", json!(0.1)),
+        ]);
+    }
+    v
+}
+
+/// Every field the quiet set may touch (for any dimension; the fluid's own field only for a
+/// fluid that has it), at its default.
+fn standard_values(target: Target) -> Vec<(&'static str, Value)> {
+    let defaults = serde_json::to_value(Mps::default()).expect("Mps serializes");
+    let all = quiet_values(Target {
+        dimension: 2,
+        yield_stress: true,
+    });
+    all.into_iter()
+        .filter_map(|(path, _)| match path.strip_prefix("mps.") {
+            Some(key) => Some((path, defaults[key].clone())),
+            // The only fluid field: eq. 8's term, on by default.
+            None => target.yield_stress.then_some((path, json!(true))),
+        })
+        .collect()
+}
+
+/// The values of `preset` for the manifest `root` (its dimension and fluid as they stand).
+fn values(preset: PresetName, root: &Value) -> Vec<(&'static str, Value)> {
+    let target = Target {
+        dimension: root["dimension"].as_u64().unwrap_or(2),
+        yield_stress: matches!(
+            root["fluid"]["model"].as_str(),
+            Some("bingham" | "bi_viscosity")
+        ),
+    };
+    match preset {
+        PresetName::Standard => standard_values(target),
+        PresetName::Quiet => quiet_values(target),
+    }
+}
+
+/// Resolves `mps.preset` in `root` (the manifest after its overrides) and sets it to null.
+/// `map` locates what the file wrote, `touched` what the overrides set. Returns the paths the
+/// preset filled in.
+pub fn resolve(root: &mut Value, map: &SourceMap, touched: &Touched) -> Result<BTreeSet<String>> {
+    let raw = root["mps"]["preset"].take();
+    if raw.is_null() {
+        return Ok(BTreeSet::new());
+    }
+    let preset: PresetName =
+        serde_json::from_value(raw.clone()).map_err(|_| ManifestError::Override {
+            key: "mps.preset".to_string(),
+            message: format!("unknown preset {raw}; expected `standard` or `quiet`"),
+        })?;
+    let from_set = touched.is_set("mps.preset");
+    let mut filled = BTreeSet::new();
+    for (path, value) in values(preset, root) {
+        let written = map.written_pos(path).is_some() && !touched.is_reset(path);
+        if touched.is_set(path) || (!from_set && written) {
+            continue;
+        }
+        let (section, key) = path.split_once('.').expect("dotted path");
+        root[section][key] = value;
+        filled.insert(path.to_string());
+    }
+    Ok(filled)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_standard_preset_names_every_field_the_quiet_one_may_set() {
+        for dimension in [2, 3] {
+            for yield_stress in [false, true] {
+                let t = Target {
+                    dimension,
+                    yield_stress,
+                };
+                let standard: BTreeSet<_> = standard_values(t).into_iter().map(|p| p.0).collect();
+                for (path, value) in quiet_values(t) {
+                    assert!(standard.contains(path), "{path}");
+                    let back = standard_values(t)
+                        .into_iter()
+                        .find(|p| p.0 == path)
+                        .unwrap()
+                        .1;
+                    assert_ne!(back, value, "{path}: the quiet value is the default");
+                }
+            }
+        }
+    }
+}
