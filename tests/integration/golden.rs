@@ -96,6 +96,25 @@ const CASES: &[(&str, &[&str], &str)] = &[
         ],
         "a01b4eacbd220e1dfd01032798b7f8f48823d3b7188bd8ec7da7f63cfd775ec9",
     ),
+    // The quiet preset (issue "A quiet core": its candidate default), pinned before it becomes
+    // the default: the 2D heap (the 2D yield set: incremental scheme, regularisation, the
+    // augmented-Lagrangian rigid state) and the 3D slump (the 3D yield set) of the cases
+    // above.
+    (
+        "column_collapse_2d.yaml",
+        &["spacing_m=0.02", "time.end_s=0.3", "mps.preset=quiet"],
+        "c94cb8b6def76836fe50de86644605632395b1c20e0ecd16016fd39cc374c261",
+    ),
+    (
+        "slump_3d.yaml",
+        &[
+            "spacing_m=0.025",
+            "time.end_s=0.4",
+            "scene.lift_height_m=0.05",
+            "mps.preset=quiet",
+        ],
+        "f3e6279cbf766c7cf7d6e3da9b62076f1dbb3e196af3c73b28ba708d8b114483",
+    ),
 ];
 
 fn final_hash(experiment: &str, sets: &[&str], threads: usize) -> String {
