@@ -1,7 +1,8 @@
-"""Max fluid speed against time for the 2D tank at rest under both pressure schemes
-(docs/validation.md, "Holding still"). Input: the CSVs of `runner export --csv RUN` for each scheme.
+"""Max fluid speed against time for the 2D tank at rest under the standard scheme and a
+quiet one (README "Holding still", docs/validation.md "Holding still"). Input: the CSVs of
+`runner export --csv RUN` for each run. LABEL names the quiet run (default: the preset).
 
-Usage: python tools/plot_still_tank.py STANDARD.csv INCREMENTAL.csv OUT.png
+Usage: python tools/plot_still_tank.py STANDARD.csv QUIET.csv OUT.png [LABEL]
 """
 import csv
 import sys
@@ -21,11 +22,12 @@ def series(path):
 
 
 def main():
-    standard, incremental, out = sys.argv[1:4]
+    standard, quiet, out = sys.argv[1:4]
+    quiet_label = sys.argv[4] if len(sys.argv) > 4 else "mps.preset: quiet"
     fig, ax = plt.subplots(figsize=(7, 4), dpi=120)
-    for path, label in [(standard, "standard"), (incremental, "incremental")]:
+    for path, label in [(standard, "mps.pressure_scheme: standard"), (quiet, quiet_label)]:
         t, v = series(path)
-        ax.semilogy(t, v, label=f"mps.pressure_scheme: {label}")
+        ax.semilogy(t, v, label=label)
     ax.axhline(0.017, color="grey", ls="--", lw=1, label="1 % of sqrt(gH)")
     ax.axhline(1e-3, color="grey", ls=":", lw=1, label="1 mm/s")
     ax.set_xlabel("time (s)")
