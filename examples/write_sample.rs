@@ -30,6 +30,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         canonical,
         experiment_sha256: &sha,
         name: "sample",
+        default_preset: None,
         threads: 1,
     };
     let mut rec = Recorder::create(&path, &header)?;

@@ -2,7 +2,8 @@
 //! manifest rebuilt from the canonical form stored in the file and checked against its hash,
 //! the messages in file order, and a solver restored from a logged checkpoint.
 use crate::checkpoint;
-use crate::experiment::{self, Manifest, Resolved, build_scene};
+use crate::experiment::{Manifest, Resolved, SceneSpec, build_scene};
+use crate::manifest::{self, PresetName};
 use crate::mps::Solver;
 use crate::proto::mps::v1::StateCheckpoint;
 use crate::record::{META_MANIFEST, RunFile, time_text};
@@ -40,8 +41,25 @@ pub fn manifest_of(run: &RunFile) -> Result<Resolved, ManifestCheck> {
     let canonical = field("canonical")?;
     let recorded = field("experiment_sha256")?;
     let name = meta.get("name").map_or("manifest", |s| s.as_str());
-    let resolved = experiment::from_str(canonical, &format!("{name} (stored canonical)"), &[])
-        .map_err(|e| ManifestCheck::Invalid(e.to_string()))?;
+    let resolved = manifest::from_canonical::<SceneSpec>(
+        canonical,
+        &format!("{name} (stored canonical)"),
+        &[],
+    )
+    .map_err(|e| ManifestCheck::Invalid(e.to_string()))?;
+    // The default preset its source was resolved under (none before the field existed).
+    let default_preset = match meta.get("default_preset") {
+        None => None,
+        Some(text) => Some(
+            serde_json::from_value::<PresetName>(serde_json::Value::String(text.clone())).map_err(
+                |_| {
+                    ManifestCheck::Mismatch(format!(
+                        "manifest: unknown default_preset {text:?} (written by a newer build?)"
+                    ))
+                },
+            )?,
+        ),
+    };
     if resolved.hash_hex != *recorded {
         return Err(ManifestCheck::Mismatch(format!(
             "manifest: the stored canonical form hashes to {}, but the file records experiment_sha256 {recorded}",
@@ -72,7 +90,13 @@ pub fn manifest_of(run: &RunFile) -> Result<Resolved, ManifestCheck> {
         None => Vec::new(),
     };
     let source = meta.get("source").cloned().unwrap_or_default();
-    match experiment::from_str(&source, &format!("{name} (stored source)"), &overrides) {
+    let from_source = manifest::from_str_under::<SceneSpec>(
+        &source,
+        &format!("{name} (stored source)"),
+        &overrides,
+        default_preset,
+    );
+    match from_source {
         Ok(from_source) if from_source.hash_hex == *recorded => {}
         Ok(from_source) => {
             return Err(ManifestCheck::Mismatch(format!(
@@ -89,6 +113,7 @@ pub fn manifest_of(run: &RunFile) -> Result<Resolved, ManifestCheck> {
     Ok(Resolved {
         source_text: source,
         overrides,
+        default_preset,
         ..resolved
     })
 }

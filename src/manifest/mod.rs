@@ -53,7 +53,20 @@ pub struct Resolved<S> {
     pub canonical: String,
     /// Lowercase hex SHA-256 of `canonical` (64 characters).
     pub hash_hex: String,
+    /// The preset the manifest was resolved under where neither its file nor an override
+    /// named one ([`DEFAULT_PRESET`] for a new run; a file's recorded one when it is taken
+    /// back up).
+    pub default_preset: Option<PresetName>,
 }
+
+/// The preset a manifest runs under when neither its file nor an override names one (with
+/// the precedence of a preset written in the file: the file's fields win). None while
+/// `mps.preset: quiet` is experimental. A file records the default it was resolved under
+/// (metadata `manifest.default_preset`, written only when there is one) and its source is
+/// resolved under that one again when it is taken back up ([`from_str_under`]), so files
+/// keep verifying when this changes; a stored canonical form, which holds every field, is
+/// resolved under none ([`from_canonical`]).
+pub const DEFAULT_PRESET: Option<PresetName> = None;
 
 impl<S> Resolved<S> {
     /// The first 12 hex digits of the hash (for file names).
@@ -80,6 +93,28 @@ pub fn from_str<S: SceneSection>(
     source_name: &str,
     overrides: &[String],
 ) -> Result<Resolved<S>> {
+    from_str_under(text, source_name, overrides, DEFAULT_PRESET)
+}
+
+/// A canonical form (stored in a run file or written by `runner expand`), with `overrides`:
+/// resolved under no default preset, since it holds every field that differs from the
+/// behaviour before the presets.
+pub fn from_canonical<S: SceneSection>(
+    text: &str,
+    source_name: &str,
+    overrides: &[String],
+) -> Result<Resolved<S>> {
+    from_str_under(text, source_name, overrides, None)
+}
+
+/// Like [`from_str`], under `default_preset` where neither the file nor an override names a
+/// preset.
+pub fn from_str_under<S: SceneSection>(
+    text: &str,
+    source_name: &str,
+    overrides: &[String],
+    default_preset: Option<PresetName>,
+) -> Result<Resolved<S>> {
     let full_text = text;
     let text: &str = &sweep::strip(full_text);
     let parsed: Manifest<S> = serde_saphyr::from_str_with_options(text, yaml_options())
@@ -103,7 +138,7 @@ pub fn from_str<S: SceneSection>(
     for raw in overrides {
         overrides::apply::<S>(&mut value, raw, &mut touched)?;
     }
-    let preset_filled = preset::resolve(&mut value, &map, &touched)?;
+    let preset_filled = preset::resolve(&mut value, &map, &touched, default_preset)?;
     canonical::normalise_negative_zero(&mut value);
     let manifest = rebuild(&value, overrides)?;
 
@@ -138,6 +173,7 @@ pub fn from_str<S: SceneSection>(
         overrides: overrides.to_vec(),
         canonical,
         hash_hex,
+        default_preset,
     })
 }
 

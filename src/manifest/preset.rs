@@ -117,18 +117,27 @@ fn values(preset: PresetName, root: &Value) -> Vec<(&'static str, Value)> {
 }
 
 /// Resolves `mps.preset` in `root` (the manifest after its overrides) and sets it to null.
-/// `map` locates what the file wrote, `touched` what the overrides set. Returns the paths the
-/// preset filled in.
-pub fn resolve(root: &mut Value, map: &SourceMap, touched: &Touched) -> Result<BTreeSet<String>> {
+/// `map` locates what the file wrote, `touched` what the overrides set; `default` applies,
+/// as if written in the file, where neither names a preset (null written or set names
+/// none). Returns the paths the preset filled in.
+pub fn resolve(
+    root: &mut Value,
+    map: &SourceMap,
+    touched: &Touched,
+    default: Option<PresetName>,
+) -> Result<BTreeSet<String>> {
     let raw = root["mps"]["preset"].take();
-    if raw.is_null() {
-        return Ok(BTreeSet::new());
-    }
-    let preset: PresetName =
-        serde_json::from_value(raw.clone()).map_err(|_| ManifestError::Override {
-            key: "mps.preset".to_string(),
-            message: format!("unknown preset {raw}; expected `standard` or `quiet`"),
-        })?;
+    let named = touched.is_set("mps.preset") || map.written_pos("mps.preset").is_some();
+    let preset: PresetName = match (raw.is_null(), named, default) {
+        (false, _, _) => {
+            serde_json::from_value(raw.clone()).map_err(|_| ManifestError::Override {
+                key: "mps.preset".to_string(),
+                message: format!("unknown preset {raw}; expected `standard` or `quiet`"),
+            })?
+        }
+        (true, false, Some(preset)) => preset,
+        (true, _, _) => return Ok(BTreeSet::new()),
+    };
     let from_set = touched.is_set("mps.preset");
     let mut filled = BTreeSet::new();
     for (path, value) in values(preset, root) {

@@ -100,6 +100,9 @@ pub struct RunHeader<'a> {
     /// Hex SHA-256 of `canonical`.
     pub experiment_sha256: &'a str,
     pub name: &'a str,
+    /// The default preset the source was resolved under (`manifest::DEFAULT_PRESET` for a
+    /// new run); recorded as `default_preset` only when there is one.
+    pub default_preset: Option<&'a str>,
     /// Informational only (the recorded state does not depend on it).
     pub threads: usize,
 }
@@ -265,17 +268,18 @@ impl Recorder {
         let build = BuildInfo::current();
         let overrides = serde_json::to_string(header.overrides).expect("strings serialize");
         let threads = header.threads.to_string();
+        let mut manifest_entries = vec![
+            ("source", header.manifest_source),
+            ("canonical", header.canonical),
+            ("experiment_sha256", header.experiment_sha256),
+            ("overrides", overrides.as_str()),
+            ("name", header.name),
+        ];
+        if let Some(preset) = header.default_preset {
+            manifest_entries.push(("default_preset", preset));
+        }
         let start_metadata: [(&str, Vec<(&str, &str)>); 3] = [
-            (
-                META_MANIFEST,
-                vec![
-                    ("source", header.manifest_source),
-                    ("canonical", header.canonical),
-                    ("experiment_sha256", header.experiment_sha256),
-                    ("overrides", &overrides),
-                    ("name", header.name),
-                ],
-            ),
+            (META_MANIFEST, manifest_entries),
             (
                 META_BUILD,
                 vec![

@@ -405,7 +405,13 @@ fn is_quiet_preset(run: &RunFile) -> bool {
     let Some(canonical) = run.manifest_field("canonical") else {
         return false;
     };
-    let resolve = |sets: &[String]| crate::experiment::from_str(canonical, "canonical", sets);
+    let resolve = |sets: &[String]| {
+        crate::manifest::from_canonical::<crate::experiment::SceneSpec>(
+            canonical,
+            "canonical",
+            sets,
+        )
+    };
     let preset = format!("mps.preset={}", crate::manifest::PresetName::Quiet.name());
     match (resolve(&[]), resolve(&[preset])) {
         (Ok(stored), Ok(quiet)) => stored.hash_hex == quiet.hash_hex,

@@ -167,6 +167,7 @@ pub fn run_header(resolved: &Resolved, threads: usize) -> RunHeader<'_> {
         canonical: &resolved.canonical,
         experiment_sha256: &resolved.hash_hex,
         name: &resolved.manifest.name,
+        default_preset: resolved.default_preset.map(|p| p.name()),
         threads,
     }
 }

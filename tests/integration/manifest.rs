@@ -1419,3 +1419,45 @@ fn a_bad_preset_is_named_and_a_clash_says_what_the_preset_set() {
         &["mps.yield_penalty_pa_s set by mps.preset"],
     );
 }
+
+#[test]
+fn a_default_preset_applies_as_if_written_in_the_file_and_never_to_a_canonical_form() {
+    use mps_runner::experiment::SceneSpec;
+    use mps_runner::manifest::PresetName;
+    let under = |text: &str, sets: &[&str]| {
+        let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
+        manifest::from_str_under::<SceneSpec>(text, "exp.yaml", &sets, Some(PresetName::Quiet))
+            .unwrap()
+    };
+    // Today's default is none: `from_str` is `from_str_under(.., None)`.
+    assert_eq!(manifest::DEFAULT_PRESET, None);
+    let r = under(FULL, &[]);
+    let written = ok(&edit(FULL, "mps:\n", "mps:\n  preset: quiet\n"));
+    assert_eq!(
+        r.hash_hex, written.hash_hex,
+        "the file's fields win, as over a file's preset"
+    );
+    assert_eq!(r.default_preset, Some(PresetName::Quiet));
+    assert_eq!(r.manifest.mps.compressibility_1_pa, 0.45e-9);
+    assert_ne!(r.hash_hex, ok(FULL).hash_hex);
+    // A preset named, null included, in the file or by --set, replaces the default.
+    assert_eq!(
+        under(FULL, &["mps.preset=null"]).hash_hex,
+        ok(FULL).hash_hex
+    );
+    let none = edit(FULL, "mps:\n", "mps:\n  preset: null\n");
+    assert_eq!(under(&none, &[]).hash_hex, ok(FULL).hash_hex);
+    assert_eq!(
+        under(FULL, &["mps.preset=standard"]).hash_hex,
+        ok(FULL).hash_hex
+    );
+    // A canonical form holds every field: resolved under no default, whatever the default.
+    let standard = ok(FULL);
+    let back = manifest::from_canonical::<SceneSpec>(&standard.canonical, "c", &[]).unwrap();
+    assert_eq!(back.hash_hex, standard.hash_hex);
+    let back = manifest::from_canonical::<SceneSpec>(&r.canonical, "c", &[]).unwrap();
+    assert_eq!(back.hash_hex, r.hash_hex);
+    // (Under the default the standard run's canonical form would become another experiment,
+    // which is why stored forms are never read that way.)
+    assert_ne!(under(&standard.canonical, &[]).hash_hex, standard.hash_hex);
+}

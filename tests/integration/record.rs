@@ -28,6 +28,7 @@ fn header(overrides: &[String]) -> RunHeader<'_> {
         canonical: CANONICAL,
         experiment_sha256: SHA,
         name: "sample",
+        default_preset: None,
         threads: 4,
     }
 }

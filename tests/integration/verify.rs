@@ -51,6 +51,7 @@ fn rewrite(src: &Path, dst: &Path, edit: Edit) {
         canonical: &canonical,
         experiment_sha256: &hash,
         name: &meta["name"],
+        default_preset: meta.get("default_preset").map(String::as_str),
         threads: 1,
     };
     let mut rec = Recorder::create(dst, &header).unwrap();
@@ -340,6 +341,7 @@ fn unusable_files_exit_2() {
                 canonical: &resolved.canonical,
                 experiment_sha256: &resolved.hash_hex,
                 name: "smoke_2d",
+                default_preset: None,
                 threads: 1,
             },
         )
@@ -471,4 +473,47 @@ fn a_run_stopped_as_settled_verifies_from_the_start_and_from_a_checkpoint() {
     // The last step is cut to end at end_s; the time is a sum of 600 steps, round-off of
     // order 1e-16 s.
     assert!((result.summary.metrics["stop_time_s"] - 0.06).abs() < 1e-9);
+}
+
+/// A file records the default preset its source was resolved under, and is taken back up
+/// under it: it verifies although today's default (none) would resolve its source to another
+/// experiment. (The default itself is `manifest::DEFAULT_PRESET`; files written under none
+/// record nothing, so the metadata layout is as before.)
+#[test]
+fn a_file_resolved_under_a_default_preset_records_it_and_verifies() {
+    use mps_runner::experiment::SceneSpec;
+    use mps_runner::manifest::{self, PresetName};
+    let dir = tempfile::tempdir().unwrap();
+    let plain = common::run_completed(
+        &common::resolve("smoke_2d.yaml", &["time.end_s=0.005"]),
+        dir.path(),
+        1,
+    );
+    let plain = read_run(&plain.path).unwrap();
+    assert_eq!(plain.manifest_field("default_preset"), None);
+
+    let path = common::experiment("smoke_2d.yaml");
+    let text = std::fs::read_to_string(&path).unwrap();
+    let sets = vec!["time.end_s=0.005".to_string()];
+    let resolved = manifest::from_str_under::<SceneSpec>(
+        &text,
+        "smoke_2d.yaml",
+        &sets,
+        Some(PresetName::Quiet),
+    )
+    .unwrap();
+    let today = manifest::from_str::<SceneSpec>(&text, "smoke_2d.yaml", &sets).unwrap();
+    assert_ne!(resolved.hash_hex, today.hash_hex);
+    let out = tempfile::tempdir().unwrap();
+    let file = common::run_completed(&resolved, out.path(), 1).path;
+    let run = read_run(&file).unwrap();
+    assert_eq!(run.manifest_field("default_preset"), Some("quiet"));
+    let back = mps_runner::restore::manifest_of(&run).unwrap();
+    assert_eq!(back.hash_hex, resolved.hash_hex);
+    assert_eq!(back.default_preset, Some(PresetName::Quiet));
+    common::runner()
+        .args(["verify", "--quiet"])
+        .arg(&file)
+        .assert()
+        .success();
 }

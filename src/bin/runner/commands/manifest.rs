@@ -43,10 +43,13 @@ pub fn expand(args: ExpandArgs) -> Result {
     for (k, point) in s.points.iter().enumerate() {
         let r = &point.resolved;
         let file = dir.join(format!("{}-{}.yaml", r.manifest.name, r.short_hash()));
-        // JSON is YAML: the canonical form itself, under a comment naming the point.
-        let pretty = serde_json::from_str::<serde_json::Value>(&r.canonical)
-            .and_then(|v| serde_json::to_string_pretty(&v))
+        // JSON is YAML: the canonical form, under a comment naming the point, with
+        // `mps.preset: null` written out, so that it resolves to the same experiment under
+        // any default preset (`manifest::DEFAULT_PRESET`; the key is not part of the hash).
+        let mut value = serde_json::from_str::<serde_json::Value>(&r.canonical)
             .expect("the canonical form is JSON");
+        value["mps"]["preset"] = serde_json::Value::Null;
+        let pretty = serde_json::to_string_pretty(&value).expect("JSON serializes");
         let text = format!(
             "# Point {}/{n} of sweep {} ({}): {}\n# experiment hash {}\n{pretty}\n",
             k + 1,
