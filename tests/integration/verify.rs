@@ -26,6 +26,8 @@ struct Edit {
     canonical: Option<(String, String)>,
     overrides: Option<Vec<String>>,
     experiment_sha256: Option<String>,
+    /// Leave out the recorded default preset.
+    drop_default_preset: bool,
 }
 
 /// Rewrites the run file `src` to `dst` through the Recorder, with `edit` applied.
@@ -51,7 +53,10 @@ fn rewrite(src: &Path, dst: &Path, edit: Edit) {
         canonical: &canonical,
         experiment_sha256: &hash,
         name: &meta["name"],
-        default_preset: meta.get("default_preset").map(String::as_str),
+        default_preset: meta
+            .get("default_preset")
+            .map(String::as_str)
+            .filter(|_| !edit.drop_default_preset),
         threads: 1,
     };
     let mut rec = Recorder::create(dst, &header).unwrap();
@@ -516,4 +521,24 @@ fn a_file_resolved_under_a_default_preset_records_it_and_verifies() {
         .arg(&file)
         .assert()
         .success();
+    // Without the record the source resolves under today's default to another experiment,
+    // and verify says so: the record is what keeps such a file verifiable.
+    let cut = out.path().join("without_default.mcap");
+    rewrite(
+        &file,
+        &cut,
+        Edit {
+            drop_default_preset: true,
+            ..Edit::default()
+        },
+    );
+    let (code, text) = verify_cli(&cut);
+    assert_eq!(code, 1, "{text}");
+    assert!(
+        text.contains(&format!(
+            "the stored source text with overrides {sets:?} resolves to experiment {}",
+            today.hash_hex
+        )),
+        "{text}"
+    );
 }
