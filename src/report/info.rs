@@ -400,21 +400,16 @@ impl fmt::Display for RunInfo {
 }
 
 /// Whether the run's manifest holds exactly the quiet preset's fields: setting the preset on
-/// its stored canonical form leaves the experiment as it was.
+/// its stored canonical form leaves the experiment's hash (that of the form itself) as it was.
 fn is_quiet_preset(run: &RunFile) -> bool {
     let Some(canonical) = run.manifest_field("canonical") else {
         return false;
     };
-    let resolve = |sets: &[String]| {
-        crate::manifest::from_canonical::<crate::experiment::SceneSpec>(
-            canonical,
-            "canonical",
-            sets,
-        )
-    };
     let preset = format!("mps.preset={}", crate::manifest::PresetName::Quiet.name());
-    match (resolve(&[]), resolve(&[preset])) {
-        (Ok(stored), Ok(quiet)) => stored.hash_hex == quiet.hash_hex,
-        _ => false,
-    }
+    crate::manifest::from_canonical::<crate::experiment::SceneSpec>(
+        canonical,
+        "canonical",
+        &[preset],
+    )
+    .is_ok_and(|quiet| quiet.hash_hex == crate::manifest::canonical::sha256_hex(canonical))
 }
