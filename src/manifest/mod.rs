@@ -54,19 +54,24 @@ pub struct Resolved<S> {
     /// Lowercase hex SHA-256 of `canonical` (64 characters).
     pub hash_hex: String,
     /// The preset the manifest was resolved under where neither its file nor an override
-    /// named one ([`DEFAULT_PRESET`] for a new run; a file's recorded one when it is taken
+    /// named one ([`default_preset`] for a new run; a file's recorded one when it is taken
     /// back up).
     pub default_preset: Option<PresetName>,
 }
 
-/// The preset a manifest runs under when neither its file nor an override names one (with
-/// the precedence of a preset written in the file: the file's fields win). None while
-/// `mps.preset: quiet` is experimental. A file records the default it was resolved under
-/// (metadata `manifest.default_preset`, written only when there is one) and its source is
-/// resolved under that one again when it is taken back up ([`from_str_under`]), so files
-/// keep verifying when this changes; a stored canonical form, which holds every field, is
+/// The preset a new run's manifest takes, by its dimension, where neither its file nor an
+/// override names one (with the precedence of a preset written in the file: the file's
+/// fields win; `mps.preset: null` or `standard` opts out). `quiet` in 2D, where it meets
+/// every figure of issue 31 (docs/validation.md, "Holding still"); none in 3D, where its
+/// thin layers stay stirred under the rigid state and the coarse slumps run short (README,
+/// "Holding still"). A file records the default it was resolved under (metadata
+/// `manifest.default_preset`, written only when there is one) and its source is resolved
+/// under that one again when it is taken back up ([`from_str_under`]), so files keep
+/// verifying when this changes; a stored canonical form, which holds every field, is
 /// resolved under none ([`from_canonical`]).
-pub const DEFAULT_PRESET: Option<PresetName> = None;
+pub fn default_preset(dimension: u64) -> Option<PresetName> {
+    (dimension == 2).then_some(PresetName::Quiet)
+}
 
 impl<S> Resolved<S> {
     /// The first 12 hex digits of the hash (for file names).
@@ -93,7 +98,7 @@ pub fn from_str<S: SceneSection>(
     source_name: &str,
     overrides: &[String],
 ) -> Result<Resolved<S>> {
-    from_str_under(text, source_name, overrides, DEFAULT_PRESET)
+    resolve_with(text, source_name, overrides, default_preset)
 }
 
 /// A canonical form (stored in a run file or written by `runner expand`), with `overrides`:
@@ -104,7 +109,7 @@ pub fn from_canonical<S: SceneSection>(
     source_name: &str,
     overrides: &[String],
 ) -> Result<Resolved<S>> {
-    from_str_under(text, source_name, overrides, None)
+    resolve_with(text, source_name, overrides, |_| None)
 }
 
 /// Like [`from_str`], under `default_preset` where neither the file nor an override names a
@@ -114,6 +119,17 @@ pub fn from_str_under<S: SceneSection>(
     source_name: &str,
     overrides: &[String],
     default_preset: Option<PresetName>,
+) -> Result<Resolved<S>> {
+    resolve_with(text, source_name, overrides, |_| default_preset)
+}
+
+/// The pipeline, with the default preset given by the manifest's dimension (after the
+/// overrides).
+fn resolve_with<S: SceneSection>(
+    text: &str,
+    source_name: &str,
+    overrides: &[String],
+    default_for: impl Fn(u64) -> Option<PresetName>,
 ) -> Result<Resolved<S>> {
     let full_text = text;
     let text: &str = &sweep::strip(full_text);
@@ -138,14 +154,27 @@ pub fn from_str_under<S: SceneSection>(
     for raw in overrides {
         overrides::apply::<S>(&mut value, raw, &mut touched)?;
     }
+    let default_preset = default_for(value["dimension"].as_u64().unwrap_or(2));
     let preset_filled = preset::resolve(&mut value, &map, &touched, default_preset)?;
     canonical::normalise_negative_zero(&mut value);
     let manifest = rebuild(&value, overrides)?;
 
-    if let Some(issue) = validate::check(&manifest).into_iter().next() {
+    // An issue the default preset caused (a field it set, or named in the message) comes after
+    // the user's own: `--set dimension=2` on a 3D-only scene is told so first.
+    let mut issues = validate::check(&manifest);
+    if preset_filled.by_default.is_some() {
+        let caused = |i: &checker::Issue| {
+            preset_filled
+                .paths
+                .iter()
+                .any(|p| *p == i.field || i.message.contains(p.as_str()))
+        };
+        issues.sort_by_key(caused);
+    }
+    if let Some(issue) = issues.into_iter().next() {
         let (pos, origin) = if touched.is_set(&issue.field) {
             (None, " (from --set)")
-        } else if preset_filled.contains(&issue.field) {
+        } else if preset_filled.paths.contains(&issue.field) {
             (None, " (from mps.preset)")
         } else if touched.is_reset(&issue.field) {
             (None, " (default)")
@@ -177,9 +206,11 @@ pub fn from_str_under<S: SceneSection>(
     })
 }
 
-/// Names the preset's fields that a validation message mentions but the user did not write.
-fn preset_note(issue: &checker::Issue, filled: &BTreeSet<String>) -> String {
+/// Names the preset's fields that a validation message mentions but the user did not write,
+/// and, for a default preset, how to opt out.
+fn preset_note(issue: &checker::Issue, filled: &preset::Filled) -> String {
     let named: Vec<&str> = filled
+        .paths
         .iter()
         .filter(|p| **p != issue.field && issue.message.contains(p.as_str()))
         .map(String::as_str)
@@ -187,7 +218,14 @@ fn preset_note(issue: &checker::Issue, filled: &BTreeSet<String>) -> String {
     if named.is_empty() {
         String::new()
     } else {
-        format!("; {} set by mps.preset", named.join(", "))
+        match filled.by_default {
+            Some(p) => format!(
+                "; {} set by the default mps.preset `{}` of this dimension (write `mps.preset: standard` to keep the standard scheme)",
+                named.join(", "),
+                p.name()
+            ),
+            None => format!("; {} set by mps.preset", named.join(", ")),
+        }
     }
 }
 

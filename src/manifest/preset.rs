@@ -116,18 +116,28 @@ fn values(preset: PresetName, root: &Value) -> Vec<(&'static str, Value)> {
     }
 }
 
+/// What [`resolve`] filled in.
+#[derive(Debug, Default)]
+pub struct Filled {
+    /// The paths the preset set.
+    pub paths: BTreeSet<String>,
+    /// The default preset, where it applied (neither the file nor an override named one).
+    pub by_default: Option<PresetName>,
+}
+
 /// Resolves `mps.preset` in `root` (the manifest after its overrides) and sets it to null.
 /// `map` locates what the file wrote, `touched` what the overrides set; `default` applies,
 /// as if written in the file, where neither names a preset (null written or set names
-/// none). Returns the paths the preset filled in.
+/// none).
 pub fn resolve(
     root: &mut Value,
     map: &SourceMap,
     touched: &Touched,
     default: Option<PresetName>,
-) -> Result<BTreeSet<String>> {
+) -> Result<Filled> {
     let raw = root["mps"]["preset"].take();
     let named = touched.is_set("mps.preset") || map.written_pos("mps.preset").is_some();
+    let mut filled = Filled::default();
     let preset: PresetName = match (raw.is_null(), named, default) {
         (false, _, _) => {
             serde_json::from_value(raw.clone()).map_err(|_| ManifestError::Override {
@@ -135,11 +145,13 @@ pub fn resolve(
                 message: format!("unknown preset {raw}; expected `standard` or `quiet`"),
             })?
         }
-        (true, false, Some(preset)) => preset,
-        (true, _, _) => return Ok(BTreeSet::new()),
+        (true, false, Some(preset)) => {
+            filled.by_default = Some(preset);
+            preset
+        }
+        (true, _, _) => return Ok(filled),
     };
     let from_set = touched.is_set("mps.preset");
-    let mut filled = BTreeSet::new();
     for (path, value) in values(preset, root) {
         let written = map.written_pos(path).is_some() && !touched.is_reset(path);
         if touched.is_set(path) || (!from_set && written) {
@@ -147,7 +159,7 @@ pub fn resolve(
         }
         let (section, key) = path.split_once('.').expect("dotted path");
         root[section][key] = value;
-        filled.insert(path.to_string());
+        filled.paths.insert(path.to_string());
     }
     Ok(filled)
 }

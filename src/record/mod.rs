@@ -100,7 +100,7 @@ pub struct RunHeader<'a> {
     /// Hex SHA-256 of `canonical`.
     pub experiment_sha256: &'a str,
     pub name: &'a str,
-    /// The default preset the source was resolved under (`manifest::DEFAULT_PRESET` for a
+    /// The default preset the source was resolved under (`manifest::default_preset` for a
     /// new run); recorded as `default_preset` only when there is one.
     pub default_preset: Option<&'a str>,
     /// Informational only (the recorded state does not depend on it).

@@ -59,7 +59,14 @@ fn info_of_a_finished_run_as_text_and_json() {
     );
     assert_eq!(line("outcome"), "outcome      completed");
     assert_eq!(line("stop rule"), "stop rule    none (ran to time.end_s)");
-    assert_eq!(line("scheme"), "scheme       mps.pressure_scheme standard");
+    // The 2D default, `mps.preset: quiet`.
+    assert_eq!(
+        line("scheme"),
+        "scheme       mps.pressure_scheme incremental, mps.pair_stabilisation 0.8, \
+         mps.wall_support 0.95, mps.pressure_regularisation 1.0, mps.regularisation_radius 1.5, \
+         mps.surface_depth 0.5, mps.corrected_strain_rate true, mps.compressibility_1_pa 1e-7 \
+         (= mps.preset quiet)"
+    );
     assert!(line("build").contains("release profile"), "{text}");
     assert_eq!(line("threads"), "threads      1");
     assert!(line("simulated").contains("t = 0.1 s, 100 steps"), "{text}");
@@ -149,6 +156,7 @@ fn info_names_the_quiet_schemes_switches_and_a_compressibility_off_its_default()
     let dir = tempfile::tempdir().unwrap();
     let sets = [
         "time.end_s=0.005",
+        "mps.preset=standard",
         "mps.pressure_scheme=incremental",
         "mps.pair_stabilisation=0.8",
         "mps.corrected_strain_rate=true",

@@ -71,9 +71,13 @@ fn ok(text: &str) -> Resolved {
     ok_with(text, &[])
 }
 
+/// These tests of parsing, overrides, validation and hashing read a manifest as it was read
+/// before the 2D default preset (`from_str_under(.., None)`), so that FULL, which writes
+/// every default out, stays MINIMAL's experiment; the default's own tests use
+/// `experiment::from_str`.
 fn ok_with(text: &str, overrides: &[&str]) -> Resolved {
     let overrides: Vec<String> = overrides.iter().map(|s| s.to_string()).collect();
-    match experiment::from_str(text, "exp.yaml", &overrides) {
+    match manifest::from_str_under(text, "exp.yaml", &overrides, None) {
         Ok(r) => r,
         Err(e) => panic!("expected success, got: {e}"),
     }
@@ -85,7 +89,7 @@ fn err(text: &str) -> ManifestError {
 
 fn err_with(text: &str, overrides: &[&str]) -> ManifestError {
     let overrides: Vec<String> = overrides.iter().map(|s| s.to_string()).collect();
-    match experiment::from_str(text, "exp.yaml", &overrides) {
+    match manifest::from_str_under::<SceneSpec>(text, "exp.yaml", &overrides, None) {
         Ok(r) => panic!("expected an error, got a manifest: {}", r.canonical),
         Err(e) => e,
     }
@@ -234,7 +238,9 @@ fn canonical_text_round_trips() {
 #[test]
 fn example_files_parse() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let d = experiment::load(&root.join("experiments/dam_break_2d.yaml"), &[]).unwrap();
+    // Under the standard scheme: the file leaves the compressibility to the 2D default preset.
+    let standard = ["mps.preset=standard".to_string()];
+    let d = experiment::load(&root.join("experiments/dam_break_2d.yaml"), &standard).unwrap();
     let m = &d.manifest;
     assert_eq!(m.name, "dam_break_2d");
     assert_eq!(m.dimension, 2);
@@ -1211,7 +1217,11 @@ fn experiment_hashes_stay_what_they_were() {
     // written before it unverifiable. smoke_2d's hash as of the first release of the format,
     // with the PPE tolerance of that time (the default became 1e-6 by the error budget in
     // docs/performance.md; a changed default is a new experiment, not a new form).
-    let pinned = ["mps.ppe_tolerance=1e-9".to_string()];
+    // With the standard scheme, as before the 2D default preset.
+    let pinned = [
+        "mps.ppe_tolerance=1e-9".to_string(),
+        "mps.preset=standard".to_string(),
+    ];
     let r = experiment::load(&common::experiment("smoke_2d.yaml"), &pinned).unwrap();
     assert_eq!(
         r.hash_hex,
@@ -1339,7 +1349,8 @@ fn the_quiet_preset_is_its_fields_written_out() {
         assert_eq!(preset.canonical, by_hand.canonical, "{file} {dims:?}");
         assert_eq!(preset.hash_hex, by_hand.hash_hex);
         assert!(!preset.canonical.contains("preset"), "{}", preset.canonical);
-        let plain = load_exp(file, dims);
+        // The experiment that names no preset (in 2D the default is quiet).
+        let plain = load_exp(file, &[dims, &["mps.preset=null"]].concat());
         assert_ne!(
             plain.hash_hex, preset.hash_hex,
             "{file}: the preset changed nothing"
@@ -1409,8 +1420,8 @@ fn a_bad_preset_is_named_and_a_clash_says_what_the_preset_set() {
     assert_override(&e, "mps.preset", &["loud", "`standard` or `quiet`"]);
     // A Bingham file that keeps eq. 8's term on against the preset's yield solve: the error is
     // at the user's line and names what the preset set.
-    let text = std::fs::read_to_string(common::experiment("column_collapse_2d.yaml")).unwrap()
-        + "mps:\n  preset: quiet\n";
+    let l_flow = std::fs::read_to_string(common::experiment("l_flow_2d.yaml")).unwrap();
+    let text = edit(&l_flow, "  preset: standard\n", "  preset: quiet\n");
     let e = err(&text);
     assert_invalid(
         &e,
@@ -1418,46 +1429,73 @@ fn a_bad_preset_is_named_and_a_clash_says_what_the_preset_set() {
         Some(pos_of(&text, "stress_gradient_term: true", 22)),
         &["mps.yield_penalty_pa_s set by mps.preset"],
     );
+    // Under the 2D default (the file's `preset: standard` taken out) the error says that the
+    // default set it, and how to opt out.
+    let text = edit(&l_flow, "mps:\n  preset: standard\n", "");
+    let e = experiment::from_str(&text, "exp.yaml", &[]).unwrap_err();
+    assert_invalid(
+        &e,
+        "fluid.stress_gradient_term",
+        Some(pos_of(&text, "stress_gradient_term: true", 22)),
+        &[
+            "mps.yield_penalty_pa_s set by the default mps.preset `quiet` of this dimension",
+            "write `mps.preset: standard`",
+        ],
+    );
 }
 
 #[test]
 fn a_default_preset_applies_as_if_written_in_the_file_and_never_to_a_canonical_form() {
     use mps_runner::experiment::SceneSpec;
     use mps_runner::manifest::PresetName;
-    let under = |text: &str, sets: &[&str]| {
+    let under = |text: &str, sets: &[&str], default: Option<PresetName>| {
         let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
-        manifest::from_str_under::<SceneSpec>(text, "exp.yaml", &sets, Some(PresetName::Quiet))
-            .unwrap()
+        manifest::from_str_under::<SceneSpec>(text, "exp.yaml", &sets, default).unwrap()
     };
-    // Today's default is none: `from_str` is `from_str_under(.., None)`.
-    assert_eq!(manifest::DEFAULT_PRESET, None);
-    let r = under(FULL, &[]);
-    let written = ok(&edit(FULL, "mps:\n", "mps:\n  preset: quiet\n"));
+    let quiet = |text: &str, sets: &[&str]| under(text, sets, Some(PresetName::Quiet));
+    let none = |text: &str, sets: &[&str]| under(text, sets, None);
+    let new_run = |text: &str, sets: &[&str]| {
+        let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
+        experiment::from_str(text, "exp.yaml", &sets).unwrap()
+    };
+    // The default: quiet in 2D, none in 3D; `from_str` takes it by the dimension the
+    // overrides leave.
+    assert_eq!(manifest::default_preset(2), Some(PresetName::Quiet));
+    assert_eq!(manifest::default_preset(3), None);
+    let r = new_run(FULL, &[]);
+    assert_eq!(r.default_preset, Some(PresetName::Quiet));
+    assert_eq!(r.hash_hex, quiet(FULL, &[]).hash_hex);
+    let written = new_run(&edit(FULL, "mps:\n", "mps:\n  preset: quiet\n"), &[]);
     assert_eq!(
         r.hash_hex, written.hash_hex,
         "the file's fields win, as over a file's preset"
     );
-    assert_eq!(r.default_preset, Some(PresetName::Quiet));
     assert_eq!(r.manifest.mps.compressibility_1_pa, 0.45e-9);
-    assert_ne!(r.hash_hex, ok(FULL).hash_hex);
+    assert_ne!(r.hash_hex, none(FULL, &[]).hash_hex);
+    let in_3d = new_run(FULL, &["dimension=3"]);
+    assert_eq!(in_3d.default_preset, None);
+    assert_eq!(in_3d.hash_hex, none(FULL, &["dimension=3"]).hash_hex);
     // A preset named, null included, in the file or by --set, replaces the default.
     assert_eq!(
-        under(FULL, &["mps.preset=null"]).hash_hex,
-        ok(FULL).hash_hex
+        quiet(FULL, &["mps.preset=null"]).hash_hex,
+        none(FULL, &[]).hash_hex
     );
-    let none = edit(FULL, "mps:\n", "mps:\n  preset: null\n");
-    assert_eq!(under(&none, &[]).hash_hex, ok(FULL).hash_hex);
+    let opt_out = edit(FULL, "mps:\n", "mps:\n  preset: null\n");
+    assert_eq!(quiet(&opt_out, &[]).hash_hex, none(FULL, &[]).hash_hex);
     assert_eq!(
-        under(FULL, &["mps.preset=standard"]).hash_hex,
-        ok(FULL).hash_hex
+        quiet(FULL, &["mps.preset=standard"]).hash_hex,
+        none(FULL, &[]).hash_hex
     );
     // A canonical form holds every field: resolved under no default, whatever the default.
-    let standard = ok(FULL);
+    let standard = none(FULL, &[]);
     let back = manifest::from_canonical::<SceneSpec>(&standard.canonical, "c", &[]).unwrap();
     assert_eq!(back.hash_hex, standard.hash_hex);
     let back = manifest::from_canonical::<SceneSpec>(&r.canonical, "c", &[]).unwrap();
     assert_eq!(back.hash_hex, r.hash_hex);
     // (Under the default the standard run's canonical form would become another experiment,
     // which is why stored forms are never read that way.)
-    assert_ne!(under(&standard.canonical, &[]).hash_hex, standard.hash_hex);
+    assert_ne!(
+        new_run(&standard.canonical, &[]).hash_hex,
+        standard.hash_hex
+    );
 }

@@ -718,7 +718,7 @@ fn mutate_manifest(
 }
 
 /// Loads a mutated manifest; for a single experiment also its canonical form (itself a
-/// manifest with the same hash) and the particle estimate a run starts with (two coarse
+/// manifest with the same hash, read as a canonical form: under no default preset) and the particle estimate a run starts with (two coarse
 /// scene builds).
 fn load_manifest(bytes: Vec<u8>) -> Result<Option<String>, String> {
     let text = String::from_utf8_lossy(&bytes);
@@ -735,7 +735,11 @@ fn load_manifest(bytes: Vec<u8>) -> Result<Option<String>, String> {
             Ok(broken.then(|| format!("a sweep of {} points", s.points.len())))
         }
         Ok(Plan::Single(r)) => {
-            let again = experiment::from_str(&r.canonical, "canonical.json", &[]);
+            let again = mps_runner::manifest::from_canonical::<experiment::SceneSpec>(
+                &r.canonical,
+                "canonical.json",
+                &[],
+            );
             match again {
                 Ok(a) if a.hash_hex == r.hash_hex => {}
                 Ok(a) => {

@@ -25,6 +25,7 @@ fn frustum_volume_is_5_5_litres() {
 
 #[test]
 fn two_dimensions_are_rejected() {
+    // Told before what the 2D default preset would clash with (eq. 8's term in this file).
     let err = mps_runner::experiment::load(
         &common::experiment("slump_3d.yaml"),
         &["dimension=2".to_string()],

@@ -346,7 +346,7 @@ fn unusable_files_exit_2() {
                 canonical: &resolved.canonical,
                 experiment_sha256: &resolved.hash_hex,
                 name: "smoke_2d",
-                default_preset: None,
+                default_preset: resolved.default_preset.map(|p| p.name()),
                 threads: 1,
             },
         )
@@ -481,34 +481,30 @@ fn a_run_stopped_as_settled_verifies_from_the_start_and_from_a_checkpoint() {
 }
 
 /// A file records the default preset its source was resolved under, and is taken back up
-/// under it: it verifies although today's default (none) would resolve its source to another
-/// experiment. (The default itself is `manifest::DEFAULT_PRESET`; files written under none
-/// record nothing, so the metadata layout is as before.)
+/// under it: the 2D default (`mps.preset: quiet`, `manifest::default_preset`) is recorded and
+/// load-bearing, since without it the source resolves to another experiment; a 3D file,
+/// resolved under none, records nothing (the metadata layout before the default).
 #[test]
 fn a_file_resolved_under_a_default_preset_records_it_and_verifies() {
     use mps_runner::experiment::SceneSpec;
     use mps_runner::manifest::{self, PresetName};
     let dir = tempfile::tempdir().unwrap();
-    let plain = common::run_completed(
-        &common::resolve("smoke_2d.yaml", &["time.end_s=0.005"]),
+    let in_3d = common::run_completed(
+        &common::resolve("slump_3d.yaml", &["spacing_m=0.025", "time.end_s=0.005"]),
         dir.path(),
         1,
     );
-    let plain = read_run(&plain.path).unwrap();
-    assert_eq!(plain.manifest_field("default_preset"), None);
+    let in_3d = read_run(&in_3d.path).unwrap();
+    assert_eq!(in_3d.manifest_field("default_preset"), None);
 
     let path = common::experiment("smoke_2d.yaml");
     let text = std::fs::read_to_string(&path).unwrap();
     let sets = vec!["time.end_s=0.005".to_string()];
-    let resolved = manifest::from_str_under::<SceneSpec>(
-        &text,
-        "smoke_2d.yaml",
-        &sets,
-        Some(PresetName::Quiet),
-    )
-    .unwrap();
-    let today = manifest::from_str::<SceneSpec>(&text, "smoke_2d.yaml", &sets).unwrap();
-    assert_ne!(resolved.hash_hex, today.hash_hex);
+    let resolved = manifest::from_str::<SceneSpec>(&text, "smoke_2d.yaml", &sets).unwrap();
+    assert_eq!(resolved.default_preset, Some(PresetName::Quiet));
+    let before =
+        manifest::from_str_under::<SceneSpec>(&text, "smoke_2d.yaml", &sets, None).unwrap();
+    assert_ne!(resolved.hash_hex, before.hash_hex);
     let out = tempfile::tempdir().unwrap();
     let file = common::run_completed(&resolved, out.path(), 1).path;
     let run = read_run(&file).unwrap();
@@ -521,8 +517,9 @@ fn a_file_resolved_under_a_default_preset_records_it_and_verifies() {
         .arg(&file)
         .assert()
         .success();
-    // Without the record the source resolves under today's default to another experiment,
-    // and verify says so: the record is what keeps such a file verifiable.
+    // Without the record the source resolves under none, as a file from before the default
+    // does, to another experiment, and verify says so: the record is what keeps such a file
+    // verifiable.
     let cut = out.path().join("without_default.mcap");
     rewrite(
         &file,
@@ -537,7 +534,7 @@ fn a_file_resolved_under_a_default_preset_records_it_and_verifies() {
     assert!(
         text.contains(&format!(
             "the stored source text with overrides {sets:?} resolves to experiment {}",
-            today.hash_hex
+            before.hash_hex
         )),
         "{text}"
     );

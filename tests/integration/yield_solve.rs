@@ -226,11 +226,14 @@ fn the_yield_solve_is_refused_without_its_conditions() {
         ),
     ];
     for (sets, field) in cases {
+        // Over the standard scheme: the 2D default preset sets every condition.
         let mut args = vec![
             "hash".to_string(),
             common::experiment("column_collapse_2d.yaml")
                 .display()
                 .to_string(),
+            "--set".to_string(),
+            "mps.preset=standard".to_string(),
         ];
         for s in sets {
             args.push("--set".into());

@@ -45,7 +45,7 @@ pub fn expand(args: ExpandArgs) -> Result {
         let file = dir.join(format!("{}-{}.yaml", r.manifest.name, r.short_hash()));
         // JSON is YAML: the canonical form, under a comment naming the point, with
         // `mps.preset: null` written out, so that it resolves to the same experiment under
-        // any default preset (`manifest::DEFAULT_PRESET`; the key is not part of the hash).
+        // any default preset (`manifest::default_preset`; the key is not part of the hash).
         let mut value = serde_json::from_str::<serde_json::Value>(&r.canonical)
             .expect("the canonical form is JSON");
         value["mps"]["preset"] = serde_json::Value::Null;
