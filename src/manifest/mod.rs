@@ -175,7 +175,11 @@ fn resolve_with<S: SceneSection>(
         let (pos, origin) = if touched.is_set(&issue.field) {
             (None, " (from --set)")
         } else if preset_filled.paths.contains(&issue.field) {
-            (None, " (from mps.preset)")
+            let origin = match preset_filled.by_default {
+                Some(_) => " (from the default mps.preset)",
+                None => " (from mps.preset)",
+            };
+            (None, origin)
         } else if touched.is_reset(&issue.field) {
             (None, " (default)")
         } else {
