@@ -163,13 +163,7 @@ fn resolve_with<S: SceneSection>(
     // the user's own: `--set dimension=2` on a 3D-only scene is told so first.
     let mut issues = validate::check(&manifest);
     if preset_filled.by_default.is_some() {
-        let caused = |i: &checker::Issue| {
-            preset_filled
-                .paths
-                .iter()
-                .any(|p| *p == i.field || i.message.contains(p.as_str()))
-        };
-        issues.sort_by_key(caused);
+        issues.sort_by_key(|i| preset_paths_in(i, &preset_filled).next().is_some());
     }
     if let Some(issue) = issues.into_iter().next() {
         let (pos, origin) = if touched.is_set(&issue.field) {
@@ -210,14 +204,23 @@ fn resolve_with<S: SceneSection>(
     })
 }
 
+/// The fields the preset set that `issue` is about or names in its message.
+fn preset_paths_in<'a>(
+    issue: &'a checker::Issue,
+    filled: &'a preset::Filled,
+) -> impl Iterator<Item = &'a str> {
+    filled
+        .paths
+        .iter()
+        .map(String::as_str)
+        .filter(|p| *p == issue.field || issue.message.contains(p))
+}
+
 /// Names the preset's fields that a validation message mentions but the user did not write,
 /// and, for a default preset, how to opt out.
 fn preset_note(issue: &checker::Issue, filled: &preset::Filled) -> String {
-    let named: Vec<&str> = filled
-        .paths
-        .iter()
-        .filter(|p| **p != issue.field && issue.message.contains(p.as_str()))
-        .map(String::as_str)
+    let named: Vec<&str> = preset_paths_in(issue, filled)
+        .filter(|p| *p != issue.field)
         .collect();
     if named.is_empty() {
         String::new()
