@@ -31,6 +31,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         experiment_sha256: &sha,
         name: "sample",
         default_preset: None,
+        preset_revision: None,
         threads: 1,
     };
     let mut rec = Recorder::create(&path, &header)?;

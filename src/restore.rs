@@ -60,6 +60,20 @@ pub fn manifest_of(run: &RunFile) -> Result<Resolved, ManifestCheck> {
             )?,
         ),
     };
+    // What the presets set when it was written (1 before the field existed).
+    let preset_revision = match meta.get("preset_revision") {
+        None => 1,
+        Some(text) => text
+            .parse::<u32>()
+            .ok()
+            .filter(|r| (1..=manifest::PRESET_REVISION).contains(r))
+            .ok_or_else(|| {
+                ManifestCheck::Mismatch(format!(
+                    "manifest: unknown preset_revision {text:?} (this build knows 1 to {}; written by a newer build?)",
+                    manifest::PRESET_REVISION
+                ))
+            })?,
+    };
     if resolved.hash_hex != *recorded {
         return Err(ManifestCheck::Mismatch(format!(
             "manifest: the stored canonical form hashes to {}, but the file records experiment_sha256 {recorded}",
@@ -90,11 +104,12 @@ pub fn manifest_of(run: &RunFile) -> Result<Resolved, ManifestCheck> {
         None => Vec::new(),
     };
     let source = meta.get("source").cloned().unwrap_or_default();
-    let from_source = manifest::from_str_under::<SceneSpec>(
+    let from_source = manifest::from_str_as_of::<SceneSpec>(
         &source,
         &format!("{name} (stored source)"),
         &overrides,
         default_preset,
+        preset_revision,
     );
     match from_source {
         Ok(from_source) if from_source.hash_hex == *recorded => {}
@@ -114,6 +129,7 @@ pub fn manifest_of(run: &RunFile) -> Result<Resolved, ManifestCheck> {
         source_text: source,
         overrides,
         default_preset,
+        preset_revision,
         ..resolved
     })
 }

@@ -31,7 +31,7 @@ use std::collections::BTreeSet;
 use std::path::Path;
 
 pub use error::{ManifestError, Result};
-pub use preset::PresetName;
+pub use preset::{PRESET_REVISION, PresetName};
 pub use types::{
     Fluid, Manifest, Mps, Output, PpePreconditioner, PpeSource, PressureSchemeName, SceneSection,
     Stop, Time,
@@ -57,6 +57,9 @@ pub struct Resolved<S> {
     /// named one ([`default_preset`] for a new run; a file's recorded one when it is taken
     /// back up).
     pub default_preset: Option<PresetName>,
+    /// What the presets set ([`PRESET_REVISION`] for a new run; a file's recorded one when
+    /// it is taken back up).
+    pub preset_revision: u32,
 }
 
 /// The preset a new run's manifest takes, by its dimension, where neither its file nor an
@@ -98,7 +101,13 @@ pub fn from_str<S: SceneSection>(
     source_name: &str,
     overrides: &[String],
 ) -> Result<Resolved<S>> {
-    resolve_with(text, source_name, overrides, default_preset)
+    resolve_with(
+        text,
+        source_name,
+        overrides,
+        default_preset,
+        PRESET_REVISION,
+    )
 }
 
 /// A canonical form (stored in a run file or written by `runner expand`), with `overrides`:
@@ -109,7 +118,7 @@ pub fn from_canonical<S: SceneSection>(
     source_name: &str,
     overrides: &[String],
 ) -> Result<Resolved<S>> {
-    resolve_with(text, source_name, overrides, |_| None)
+    resolve_with(text, source_name, overrides, |_| None, PRESET_REVISION)
 }
 
 /// Like [`from_str`], under `default_preset` where neither the file nor an override names a
@@ -120,7 +129,25 @@ pub fn from_str_under<S: SceneSection>(
     overrides: &[String],
     default_preset: Option<PresetName>,
 ) -> Result<Resolved<S>> {
-    resolve_with(text, source_name, overrides, |_| default_preset)
+    from_str_as_of(
+        text,
+        source_name,
+        overrides,
+        default_preset,
+        PRESET_REVISION,
+    )
+}
+
+/// Like [`from_str_under`], with the presets as they were at `revision` (a run file's
+/// recorded one).
+pub fn from_str_as_of<S: SceneSection>(
+    text: &str,
+    source_name: &str,
+    overrides: &[String],
+    default_preset: Option<PresetName>,
+    revision: u32,
+) -> Result<Resolved<S>> {
+    resolve_with(text, source_name, overrides, |_| default_preset, revision)
 }
 
 /// The pipeline, with the default preset given by the manifest's dimension (after the
@@ -130,6 +157,7 @@ fn resolve_with<S: SceneSection>(
     source_name: &str,
     overrides: &[String],
     default_for: impl Fn(u64) -> Option<PresetName>,
+    preset_revision: u32,
 ) -> Result<Resolved<S>> {
     let full_text = text;
     let text: &str = &sweep::strip(full_text);
@@ -155,7 +183,8 @@ fn resolve_with<S: SceneSection>(
         overrides::apply::<S>(&mut value, raw, &mut touched)?;
     }
     let default_preset = default_for(value["dimension"].as_u64().unwrap_or(2));
-    let preset_filled = preset::resolve(&mut value, &map, &touched, default_preset)?;
+    let preset_filled =
+        preset::resolve(&mut value, &map, &touched, default_preset, preset_revision)?;
     canonical::normalise_negative_zero(&mut value);
     let manifest = rebuild(&value, overrides)?;
 
@@ -201,6 +230,7 @@ fn resolve_with<S: SceneSection>(
         canonical,
         hash_hex,
         default_preset,
+        preset_revision,
     })
 }
 

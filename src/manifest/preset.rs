@@ -10,6 +10,9 @@
 //! written in the file; a preset written in the file; the field's default. So a file may
 //! adjust one field of its preset, and `--set mps.preset=...` on a file switches the whole
 //! set whatever the file wrote.
+//!
+//! What a preset sets changes only with a new [`PRESET_REVISION`]; a run file records the
+//! revision its source was resolved under, and is taken back up under that one.
 
 use std::collections::BTreeSet;
 
@@ -45,6 +48,16 @@ impl PresetName {
     }
 }
 
+/// The presets' current revision, recorded in every run file (`manifest.preset_revision`; a
+/// file without it was written under revision 1):
+/// 1. as first landed;
+/// 2. `quiet` with a yield stress also sets `mps.wall_face_normals: true`: the one plane
+///    fitted to a particle's wall neighbours
+///    tilts when the particle is not above a wall particle, and its no-slip factor then
+///    grips the bottom row 5-17 % too hard, which kept yielded layers thinner than about a
+///    spacing rigid (docs/validation.md, "The wall's grip").
+pub const PRESET_REVISION: u32 = 2;
+
 /// Who a preset's values are for.
 #[derive(Debug, Clone, Copy)]
 struct Target {
@@ -55,7 +68,7 @@ struct Target {
 /// The quiet set's fields and values for `target`, as dotted paths. Measured in
 /// docs/validation.md: the tanks at rest and the dam break (2D and 3D water), the heap, the
 /// inclined layer and the slump (the yield sets).
-fn quiet_values(target: Target) -> Vec<(&'static str, Value)> {
+fn quiet_values(target: Target, revision: u32) -> Vec<(&'static str, Value)> {
     let mut v = vec![
         ("mps.pressure_scheme", json!("incremental")),
         ("mps.pair_stabilisation", json!(0.8)),
@@ -80,18 +93,24 @@ fn quiet_values(target: Target) -> Vec<(&'static str, Value)> {
             ("mps.yield_penalty_adaptive", json!(true)),
             ("mps.yield_velocity_fraction", json!(0.1)),
         ]);
+        if revision >= 2 {
+            v.push(("mps.wall_face_normals", json!(true)));
+        }
     }
     v
 }
 
 /// Every field the quiet set may touch (for any dimension; the fluid's own field only for a
 /// fluid that has it), at its default.
-fn standard_values(target: Target) -> Vec<(&'static str, Value)> {
+fn standard_values(target: Target, revision: u32) -> Vec<(&'static str, Value)> {
     let defaults = serde_json::to_value(Mps::default()).expect("Mps serializes");
-    let all = quiet_values(Target {
-        dimension: 2,
-        yield_stress: true,
-    });
+    let all = quiet_values(
+        Target {
+            dimension: 2,
+            yield_stress: true,
+        },
+        revision,
+    );
     all.into_iter()
         .filter_map(|(path, _)| match path.strip_prefix("mps.") {
             Some(key) => Some((path, defaults[key].clone())),
@@ -101,8 +120,9 @@ fn standard_values(target: Target) -> Vec<(&'static str, Value)> {
         .collect()
 }
 
-/// The values of `preset` for the manifest `root` (its dimension and fluid as they stand).
-fn values(preset: PresetName, root: &Value) -> Vec<(&'static str, Value)> {
+/// The values of `preset` at `revision` for the manifest `root` (its dimension and fluid as
+/// they stand).
+fn values(preset: PresetName, root: &Value, revision: u32) -> Vec<(&'static str, Value)> {
     let target = Target {
         dimension: root["dimension"].as_u64().unwrap_or(2),
         yield_stress: matches!(
@@ -111,8 +131,8 @@ fn values(preset: PresetName, root: &Value) -> Vec<(&'static str, Value)> {
         ),
     };
     match preset {
-        PresetName::Standard => standard_values(target),
-        PresetName::Quiet => quiet_values(target),
+        PresetName::Standard => standard_values(target, revision),
+        PresetName::Quiet => quiet_values(target, revision),
     }
 }
 
@@ -128,12 +148,13 @@ pub struct Filled {
 /// Resolves `mps.preset` in `root` (the manifest after its overrides) and sets it to null.
 /// `map` locates what the file wrote, `touched` what the overrides set; `default` applies,
 /// as if written in the file, where neither names a preset (null written or set names
-/// none).
+/// none). `revision`: what the presets set ([`PRESET_REVISION`] for a new run).
 pub fn resolve(
     root: &mut Value,
     map: &SourceMap,
     touched: &Touched,
     default: Option<PresetName>,
+    revision: u32,
 ) -> Result<Filled> {
     let raw = root["mps"]["preset"].take();
     let named = touched.is_set("mps.preset") || map.written_pos("mps.preset").is_some();
@@ -152,7 +173,7 @@ pub fn resolve(
         (true, _, _) => return Ok(filled),
     };
     let from_set = touched.is_set("mps.preset");
-    for (path, value) in values(preset, root) {
+    for (path, value) in values(preset, root, revision) {
         let written = map.written_pos(path).is_some() && !touched.is_reset(path);
         if touched.is_set(path) || (!from_set && written) {
             continue;
@@ -176,15 +197,20 @@ mod tests {
                     dimension,
                     yield_stress,
                 };
-                let standard: BTreeSet<_> = standard_values(t).into_iter().map(|p| p.0).collect();
-                for (path, value) in quiet_values(t) {
-                    assert!(standard.contains(path), "{path}");
-                    let back = standard_values(t)
+                for revision in 1..=PRESET_REVISION {
+                    let standard: BTreeSet<_> = standard_values(t, revision)
                         .into_iter()
-                        .find(|p| p.0 == path)
-                        .unwrap()
-                        .1;
-                    assert_ne!(back, value, "{path}: the quiet value is the default");
+                        .map(|p| p.0)
+                        .collect();
+                    for (path, value) in quiet_values(t, revision) {
+                        assert!(standard.contains(path), "{path}");
+                        let back = standard_values(t, revision)
+                            .into_iter()
+                            .find(|p| p.0 == path)
+                            .unwrap()
+                            .1;
+                        assert_ne!(back, value, "{path}: the quiet value is the default");
+                    }
                 }
             }
         }

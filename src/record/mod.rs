@@ -103,6 +103,10 @@ pub struct RunHeader<'a> {
     /// The default preset the source was resolved under (`manifest::default_preset` for a
     /// new run); recorded as `default_preset` only when there is one.
     pub default_preset: Option<&'a str>,
+    /// What the presets set when the source was resolved (`manifest::PRESET_REVISION` for
+    /// a new run); recorded as `preset_revision` (`None`: not recorded, as in files from
+    /// before the revisions, which read as revision 1).
+    pub preset_revision: Option<u32>,
     /// Informational only (the recorded state does not depend on it).
     pub threads: usize,
 }
@@ -268,6 +272,7 @@ impl Recorder {
         let build = BuildInfo::current();
         let overrides = serde_json::to_string(header.overrides).expect("strings serialize");
         let threads = header.threads.to_string();
+        let preset_revision = header.preset_revision.map(|r| r.to_string());
         let mut manifest_entries = vec![
             ("source", header.manifest_source),
             ("canonical", header.canonical),
@@ -277,6 +282,9 @@ impl Recorder {
         ];
         if let Some(preset) = header.default_preset {
             manifest_entries.push(("default_preset", preset));
+        }
+        if let Some(revision) = &preset_revision {
+            manifest_entries.push(("preset_revision", revision.as_str()));
         }
         let start_metadata: [(&str, Vec<(&str, &str)>); 3] = [
             (META_MANIFEST, manifest_entries),

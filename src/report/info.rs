@@ -399,17 +399,26 @@ impl fmt::Display for RunInfo {
     }
 }
 
-/// Whether the run's manifest holds exactly the quiet preset's fields: setting the preset on
-/// its stored canonical form leaves the experiment's hash (that of the form itself) as it was.
+/// Whether the run's manifest holds exactly the quiet preset's fields (as they were at the
+/// file's preset revision): setting the preset on its stored canonical form leaves the
+/// experiment's hash (that of the form itself) as it was.
 fn is_quiet_preset(run: &RunFile) -> bool {
     let Some(canonical) = run.manifest_field("canonical") else {
         return false;
     };
+    let revision = run
+        .manifest_field("preset_revision")
+        .map_or(Some(1), |r| r.parse().ok());
+    let Some(revision) = revision else {
+        return false;
+    };
     let preset = format!("mps.preset={}", crate::manifest::PresetName::Quiet.name());
-    crate::manifest::from_canonical::<crate::experiment::SceneSpec>(
+    crate::manifest::from_str_as_of::<crate::experiment::SceneSpec>(
         canonical,
         "canonical",
         &[preset],
+        None,
+        revision,
     )
     .is_ok_and(|quiet| quiet.hash_hex == crate::manifest::canonical::sha256_hex(canonical))
 }

@@ -168,6 +168,7 @@ pub fn run_header(resolved: &Resolved, threads: usize) -> RunHeader<'_> {
         experiment_sha256: &resolved.hash_hex,
         name: &resolved.manifest.name,
         default_preset: resolved.default_preset.map(|p| p.name()),
+        preset_revision: Some(resolved.preset_revision),
         threads,
     }
 }

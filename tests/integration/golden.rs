@@ -8,6 +8,10 @@
 //! When `mps.preset: quiet` became the 2D default, the 2D cases of the standard scheme (smoke,
 //! dam break, heap, pour) took `mps.preset=standard`, with which they give their values
 //! before; the L-flow and the rodding write it in their files.
+//! When the preset's revision 2 gave the quiet yield set the walls' own faces
+//! (`mps.wall_face_normals`), the two preset cases took `mps.wall_face_normals=false`, with
+//! which they give their values before (so the revision changed that field alone), and the
+//! same two runs under revision 2 were minted: the 2D heap as shipped and the 3D slump.
 use crate::common;
 
 /// (experiment file, overrides, final checkpoint SHA-256).
@@ -105,7 +109,12 @@ const CASES: &[(&str, &[&str], &str)] = &[
     // slump (the 3D yield set) of the cases above.
     (
         "column_collapse_2d.yaml",
-        &["spacing_m=0.02", "time.end_s=0.3", "mps.preset=quiet"],
+        &[
+            "spacing_m=0.02",
+            "time.end_s=0.3",
+            "mps.preset=quiet",
+            "mps.wall_face_normals=false",
+        ],
         "c94cb8b6def76836fe50de86644605632395b1c20e0ecd16016fd39cc374c261",
     ),
     (
@@ -115,8 +124,26 @@ const CASES: &[(&str, &[&str], &str)] = &[
             "time.end_s=0.4",
             "scene.lift_height_m=0.05",
             "mps.preset=quiet",
+            "mps.wall_face_normals=false",
         ],
         "f3e6279cbf766c7cf7d6e3da9b62076f1dbb3e196af3c73b28ba708d8b114483",
+    ),
+    // The same two under the preset's revision 2 (the walls' own faces), minted with it: the
+    // heap as shipped (the 2D default) and the slump under `mps.preset=quiet`.
+    (
+        "column_collapse_2d.yaml",
+        &["spacing_m=0.02", "time.end_s=0.3"],
+        "31e5c53edf502ec079401c160a6f7142ec7b3e3d617a81fe6f26c1aef6e7c817",
+    ),
+    (
+        "slump_3d.yaml",
+        &[
+            "spacing_m=0.025",
+            "time.end_s=0.4",
+            "scene.lift_height_m=0.05",
+            "mps.preset=quiet",
+        ],
+        "acc690ddbaa93d6c58a550b114b6874020035a360f48ceddc5b913afa0e59b45",
     ),
     // The 2D default (`mps.preset: quiet` for water: incremental scheme, stabilisers,
     // regularisation, surface depth, compressibility 1e-7), minted when it became the default:

@@ -1310,15 +1310,41 @@ const QUIET_2D_ONLY: [&str; 2] = [
     "mps.pressure_regularisation=1",
     "mps.compressibility_1_pa=1e-7",
 ];
-/// What it adds for a fluid with a yield stress: the rigid state by the augmented Lagrangian.
-const QUIET_YIELD: [&str; 6] = [
+/// What it adds for a fluid with a yield stress: the rigid state by the augmented Lagrangian
+/// (the walls' own faces since preset revision 2).
+const QUIET_YIELD: [&str; 7] = [
     "fluid.stress_gradient_term=false",
     "mps.wall_surface_no_slip=true",
     "mps.strain_rate_radius=1.5",
     "mps.yield_penalty_pa_s=1000",
     "mps.yield_penalty_adaptive=true",
     "mps.yield_velocity_fraction=0.1",
+    "mps.wall_face_normals=true",
 ];
+
+/// Preset revision 2 adds the walls' own faces to the quiet yield set. Revision 1, under which
+/// older files are taken back up, has none; water gets none at any revision.
+#[test]
+fn the_quiet_yield_set_takes_the_walls_faces_from_revision_2() {
+    use mps_runner::experiment::SceneSpec;
+    use mps_runner::manifest::{PRESET_REVISION, PresetName};
+    assert_eq!(PRESET_REVISION, 2);
+    let path = common::experiment("inclined_layer.yaml");
+    let text = std::fs::read_to_string(&path).unwrap();
+    let at = |sets: &[&str], revision: u32| {
+        let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
+        manifest::from_str_as_of::<SceneSpec>(&text, "x", &sets, Some(PresetName::Quiet), revision)
+            .unwrap()
+            .manifest
+            .mps
+    };
+    assert!(at(&[], 2).wall_face_normals);
+    assert!(!at(&[], 1).wall_face_normals);
+    let r = manifest::from_str::<SceneSpec>(&text, "x", &[]).unwrap();
+    assert!(r.manifest.mps.wall_face_normals);
+    let water = load_exp("tank_at_rest.yaml", &["mps.preset=quiet"]).manifest;
+    assert!(!water.mps.wall_face_normals);
+}
 
 fn load_exp(file: &str, sets: &[&str]) -> Resolved {
     let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();

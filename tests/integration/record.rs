@@ -29,6 +29,7 @@ fn header(overrides: &[String]) -> RunHeader<'_> {
         experiment_sha256: SHA,
         name: "sample",
         default_preset: None,
+        preset_revision: None,
         threads: 4,
     }
 }

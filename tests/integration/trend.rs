@@ -20,6 +20,7 @@ fn fake_run(dir: &Path, n: usize, yield_pa: f64, gradient: bool, l_flow_m: Optio
         experiment_sha256: &hash,
         name: "l_flow",
         default_preset: None,
+        preset_revision: None,
         threads: 1,
     };
     let rec = Recorder::create(&dir.join(format!("l_flow-{n}.mcap")), &header).unwrap();
@@ -144,6 +145,7 @@ fn fake_lb_run(dir: &Path, n: usize, yield_pa: f64, metrics: &[(&str, f64)]) {
         experiment_sha256: &hash,
         name: "lb",
         default_preset: None,
+        preset_revision: None,
         threads: 1,
     };
     let rec = Recorder::create(&dir.join(format!("lb-{n}.mcap")), &header).unwrap();

@@ -28,6 +28,8 @@ struct Edit {
     experiment_sha256: Option<String>,
     /// Leave out the recorded default preset.
     drop_default_preset: bool,
+    /// Record this preset revision instead (`Some(None)`: none, as files from before).
+    preset_revision: Option<Option<u32>>,
 }
 
 /// Rewrites the run file `src` to `dst` through the Recorder, with `edit` applied.
@@ -57,6 +59,10 @@ fn rewrite(src: &Path, dst: &Path, edit: Edit) {
             .get("default_preset")
             .map(String::as_str)
             .filter(|_| !edit.drop_default_preset),
+        preset_revision: edit.preset_revision.unwrap_or_else(|| {
+            meta.get("preset_revision")
+                .map(|r| r.parse().expect("a recorded revision is a number"))
+        }),
         threads: 1,
     };
     let mut rec = Recorder::create(dst, &header).unwrap();
@@ -347,6 +353,7 @@ fn unusable_files_exit_2() {
                 experiment_sha256: &resolved.hash_hex,
                 name: "smoke_2d",
                 default_preset: resolved.default_preset.map(|p| p.name()),
+                preset_revision: Some(resolved.preset_revision),
                 threads: 1,
             },
         )
@@ -538,4 +545,73 @@ fn a_file_resolved_under_a_default_preset_records_it_and_verifies() {
         )),
         "{text}"
     );
+}
+
+/// A file records the preset revision its source was resolved under (`manifest.preset_revision`)
+/// and is taken back up under it, so that a preset that gains a field (revision 2: the walls'
+/// own faces for a yield-stress fluid) leaves files written before verifying. A 2D Bingham run
+/// under the default `quiet`, resolved as revision 1 resolved it: its file records 1 and
+/// verifies; without the record (a file from before revisions) it reads as 1 and verifies; told
+/// 2 its source resolves to today's experiment, another one, and verify says so; a revision this
+/// build does not know is refused.
+#[test]
+fn a_file_records_its_preset_revision_and_verifies_under_it() {
+    use mps_runner::experiment::SceneSpec;
+    use mps_runner::manifest::{self, PRESET_REVISION, PresetName};
+    let path = common::experiment("inclined_layer.yaml");
+    let text = std::fs::read_to_string(&path).unwrap();
+    let sets: Vec<String> = ["spacing_m=0.01", "scene.period_m=0.12", "time.end_s=0.003"]
+        .map(String::from)
+        .to_vec();
+    let first = manifest::from_str_as_of::<SceneSpec>(
+        &text,
+        "inclined_layer.yaml",
+        &sets,
+        Some(PresetName::Quiet),
+        1,
+    )
+    .unwrap();
+    assert!(!first.manifest.mps.wall_face_normals);
+    let today = manifest::from_str::<SceneSpec>(&text, "inclined_layer.yaml", &sets).unwrap();
+    assert_eq!(today.preset_revision, PRESET_REVISION);
+    assert!(today.manifest.mps.wall_face_normals);
+    assert_ne!(first.hash_hex, today.hash_hex);
+    let out = tempfile::tempdir().unwrap();
+    let file = common::run_completed(&first, out.path(), 1).path;
+    let run = read_run(&file).unwrap();
+    assert_eq!(run.manifest_field("preset_revision"), Some("1"));
+    assert_eq!(
+        mps_runner::restore::manifest_of(&run)
+            .unwrap()
+            .preset_revision,
+        1
+    );
+    let (code, text) = verify_cli(&file);
+    assert_eq!(code, 0, "{text}");
+    let rewritten = |name: &str, revision: Option<u32>| {
+        let to = out.path().join(name);
+        rewrite(
+            &file,
+            &to,
+            Edit {
+                preset_revision: Some(revision),
+                ..Edit::default()
+            },
+        );
+        verify_cli(&to)
+    };
+    let (code, text) = rewritten("unrecorded.mcap", None);
+    assert_eq!(code, 0, "{text}");
+    let (code, text) = rewritten("told_2.mcap", Some(2));
+    assert_eq!(code, 1, "{text}");
+    assert!(
+        text.contains(&format!(
+            "the stored source text with overrides {sets:?} resolves to experiment {}",
+            today.hash_hex
+        )),
+        "{text}"
+    );
+    let (code, text) = rewritten("told_99.mcap", Some(99));
+    assert_eq!(code, 1, "{text}");
+    assert!(text.contains("unknown preset_revision \"99\""), "{text}");
 }
