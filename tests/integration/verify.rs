@@ -536,12 +536,16 @@ fn a_file_resolved_under_a_default_preset_records_it_and_verifies() {
             ..Edit::default()
         },
     );
-    let (code, text) = verify_cli(&cut);
+    assert_source_resolves_to(verify_cli(&cut), &sets, &before.hash_hex);
+}
+
+/// Verify's answer `(code, text)` refuses a file whose stored source, with its overrides
+/// `sets`, resolves to the experiment `hash` rather than the recorded one.
+fn assert_source_resolves_to((code, text): (i32, String), sets: &[String], hash: &str) {
     assert_eq!(code, 1, "{text}");
     assert!(
         text.contains(&format!(
-            "the stored source text with overrides {sets:?} resolves to experiment {}",
-            before.hash_hex
+            "the stored source text with overrides {sets:?} resolves to experiment {hash}"
         )),
         "{text}"
     );
@@ -602,15 +606,7 @@ fn a_file_records_its_preset_revision_and_verifies_under_it() {
     };
     let (code, text) = rewritten("unrecorded.mcap", None);
     assert_eq!(code, 0, "{text}");
-    let (code, text) = rewritten("told_2.mcap", Some(2));
-    assert_eq!(code, 1, "{text}");
-    assert!(
-        text.contains(&format!(
-            "the stored source text with overrides {sets:?} resolves to experiment {}",
-            today.hash_hex
-        )),
-        "{text}"
-    );
+    assert_source_resolves_to(rewritten("told_2.mcap", Some(2)), &sets, &today.hash_hex);
     let (code, text) = rewritten("told_99.mcap", Some(99));
     assert_eq!(code, 1, "{text}");
     assert!(text.contains("unknown preset_revision \"99\""), "{text}");
