@@ -61,19 +61,9 @@ pub fn manifest_of(run: &RunFile) -> Result<Resolved, ManifestCheck> {
         ),
     };
     // What the presets set when it was written (1 before the field existed).
-    let preset_revision = match meta.get("preset_revision") {
-        None => 1,
-        Some(text) => text
-            .parse::<u32>()
-            .ok()
-            .filter(|r| (1..=manifest::PRESET_REVISION).contains(r))
-            .ok_or_else(|| {
-                ManifestCheck::Mismatch(format!(
-                    "manifest: unknown preset_revision {text:?} (this build knows 1 to {}; written by a newer build?)",
-                    manifest::PRESET_REVISION
-                ))
-            })?,
-    };
+    let preset_revision =
+        manifest::recorded_revision(meta.get("preset_revision").map(String::as_str))
+            .map_err(|e| ManifestCheck::Mismatch(format!("manifest: {e}")))?;
     if resolved.hash_hex != *recorded {
         return Err(ManifestCheck::Mismatch(format!(
             "manifest: the stored canonical form hashes to {}, but the file records experiment_sha256 {recorded}",

@@ -31,7 +31,7 @@ use std::collections::BTreeSet;
 use std::path::Path;
 
 pub use error::{ManifestError, Result};
-pub use preset::{PRESET_REVISION, PresetName};
+pub use preset::{PRESET_REVISION, PresetName, recorded_revision};
 pub use types::{
     Fluid, Manifest, Mps, Output, PpePreconditioner, PpeSource, PressureSchemeName, SceneSection,
     Stop, Time,

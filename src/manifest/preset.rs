@@ -52,11 +52,27 @@ impl PresetName {
 /// file without it was written under revision 1):
 /// 1. as first landed;
 /// 2. `quiet` with a yield stress also sets `mps.wall_face_normals: true`: the one plane
-///    fitted to a particle's wall neighbours
-///    tilts when the particle is not above a wall particle, and its no-slip factor then
-///    grips the bottom row 5-17 % too hard, which kept yielded layers thinner than about a
-///    spacing rigid (docs/validation.md, "The wall's grip").
+///    fitted to a particle's wall neighbours tilts when the particle is not above a wall
+///    particle, and its no-slip factor then grips the bottom row 5-17 % too hard, which kept
+///    yielded layers thinner than about a spacing rigid (docs/validation.md, "The wall's
+///    grip").
 pub const PRESET_REVISION: u32 = 2;
+
+/// The revision a run file records (`manifest.preset_revision`, `None` where absent): 1 for a
+/// file from before revisions; an error for one this build does not know.
+pub fn recorded_revision(text: Option<&str>) -> std::result::Result<u32, String> {
+    let Some(text) = text else {
+        return Ok(1);
+    };
+    text.parse::<u32>()
+        .ok()
+        .filter(|r| (1..=PRESET_REVISION).contains(r))
+        .ok_or_else(|| {
+            format!(
+                "unknown preset_revision {text:?} (this build knows 1 to {PRESET_REVISION}; written by a newer build?)"
+            )
+        })
+}
 
 /// Who a preset's values are for.
 #[derive(Debug, Clone, Copy)]

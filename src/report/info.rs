@@ -406,10 +406,8 @@ fn is_quiet_preset(run: &RunFile) -> bool {
     let Some(canonical) = run.manifest_field("canonical") else {
         return false;
     };
-    let revision = run
-        .manifest_field("preset_revision")
-        .map_or(Some(1), |r| r.parse().ok());
-    let Some(revision) = revision else {
+    let Ok(revision) = crate::manifest::recorded_revision(run.manifest_field("preset_revision"))
+    else {
         return false;
     };
     let preset = format!("mps.preset={}", crate::manifest::PresetName::Quiet.name());

@@ -557,7 +557,7 @@ fn assert_source_resolves_to((code, text): (i32, String), sets: &[String], hash:
 /// under the default `quiet`, resolved as revision 1 resolved it: its file records 1 and
 /// verifies; without the record (a file from before revisions) it reads as 1 and verifies; told
 /// 2 its source resolves to today's experiment, another one, and verify says so; a revision this
-/// build does not know is refused.
+/// build does not know is refused. `info` names the preset by the file's revision.
 #[test]
 fn a_file_records_its_preset_revision_and_verifies_under_it() {
     use mps_runner::experiment::SceneSpec;
@@ -592,6 +592,10 @@ fn a_file_records_its_preset_revision_and_verifies_under_it() {
     );
     let (code, text) = verify_cli(&file);
     assert_eq!(code, 0, "{text}");
+    // `info` reads the scheme against the preset as it was at the file's revision.
+    let info = common::runner().arg("info").arg(&file).output().unwrap();
+    let info = String::from_utf8_lossy(&info.stdout);
+    assert!(info.contains("(= mps.preset quiet)"), "{info}");
     let rewritten = |name: &str, revision: Option<u32>| {
         let to = out.path().join(name);
         rewrite(
