@@ -536,10 +536,21 @@ fn surface_depth_puts_the_zero_of_pressure_at_the_fill_height() {
 /// Fluid rows 0..rows above a floor whose surface is y = 0 (particles at (k + 1/2) l0), a
 /// wall row and two dummy rows below it, `columns` wide, all at rest.
 fn floor_lattice(l0: f64, columns: usize, rows: i32) -> mps_runner::mps::Particles<2> {
+    slid_floor_lattice(l0, columns, rows, 0.0)
+}
+
+/// [`floor_lattice`] with the fluid rows slid `shift` spacings along the floor.
+fn slid_floor_lattice(
+    l0: f64,
+    columns: usize,
+    rows: i32,
+    shift: f64,
+) -> mps_runner::mps::Particles<2> {
     let mut p = mps_runner::mps::Particles::<2>::default();
     for row in -3i32..rows {
+        let offset = if row >= 0 { shift } else { 0.0 };
         for column in 0..columns {
-            let x = Vector::<2>::new(column as f64 * l0, (f64::from(row) + 0.5) * l0);
+            let x = Vector::<2>::new((column as f64 + offset) * l0, (f64::from(row) + 0.5) * l0);
             let kind = match row {
                 -1 => ParticleKind::Wall,
                 r if r < -1 => ParticleKind::Dummy,
@@ -609,15 +620,9 @@ fn wall_face_normals_extrapolate_through_each_face_at_an_edge() {
                 _ => continue,
             };
             let exact = 1.0 + d_j / d_i;
-            let factor = faces
-                .factor_of(e, &r)
-                .expect("every wall particle has a face");
-            assert!(
-                (factor / exact - 1.0).abs() < 1e-12,
-                "fluid at {:?}, wall at {:?}: {factor} against {exact}",
-                x / l0,
-                y / l0
-            );
+            assert_face_factor(&faces, e, &r, exact, || {
+                format!("fluid at {:?}, wall at {:?}", x / l0, y / l0)
+            });
             pairs += 1;
             // Beyond the side wall's reach the fitted plane is the floor itself.
             if x[1] > radius {
@@ -648,19 +653,7 @@ fn wall_faces_stay_exact_when_the_fluid_has_slid_off_the_wall_lattice() {
     let radius = 3.1 * l0;
     let mut worst_fitted: f64 = 0.0;
     for shift in [0.0, 0.1, 0.25, 0.4, 0.5] {
-        let mut p = mps_runner::mps::Particles::<2>::default();
-        for row in -3i32..6 {
-            for column in 0..30 {
-                let fluid = row >= 0;
-                let x = (column as f64 + if fluid { shift } else { 0.0 }) * l0;
-                let kind = match row {
-                    r if r >= 0 => ParticleKind::Fluid,
-                    -1 => ParticleKind::Wall,
-                    _ => ParticleKind::Dummy,
-                };
-                p.push(Vector::<2>::new(x, (f64::from(row) + 0.5) * l0), kind);
-            }
-        }
+        let p = slid_floor_lattice(l0, 30, 6, shift);
         let nb = Neighbours::build(&p.position_m, radius);
         let faces = WallFaces::build(&p, &nb, FACE_RADIUS_SPACINGS * l0, 0.5 * l0);
         let mut pairs = 0;
@@ -677,15 +670,10 @@ fn wall_faces_stay_exact_when_the_fluid_has_slid_off_the_wall_lattice() {
                     continue;
                 }
                 let exact = 1.0 + (-p.position_m[j][1]) / x[1];
-                let factor = faces
-                    .factor_of(e, &r)
-                    .expect("every wall particle has a face");
-                assert!(
-                    (factor / exact - 1.0).abs() < 1e-12,
-                    "shift {shift}: fluid at {:?}, wall at {:?}: {factor} against {exact}",
-                    x / l0,
-                    p.position_m[j] / l0
-                );
+                assert_face_factor(&faces, e, &r, exact, || {
+                    let y = p.position_m[j];
+                    format!("shift {shift}: fluid at {:?}, wall at {:?}", x / l0, y / l0)
+                });
                 pairs += 1;
                 if let Some(frame) = frame.filter(|_| r.norm() < 1.5 * l0) {
                     worst_fitted = worst_fitted.max(frame.factor(&r) / exact - 1.0);
@@ -696,6 +684,25 @@ fn wall_faces_stay_exact_when_the_fluid_has_slid_off_the_wall_lattice() {
     }
     eprintln!("the fitted plane's factor within 1.5 spacings: up to {worst_fitted:+.3} off");
     assert!(worst_fitted > 0.05, "{worst_fitted}");
+}
+
+/// Asserts that the faces give wall entry `e` (displacement `r` from the fluid particle) the
+/// factor `exact` to round-off; `at` says where.
+fn assert_face_factor<const D: usize>(
+    faces: &mps_runner::mps::viscosity::WallFaces<D>,
+    e: u32,
+    r: &Vector<D>,
+    exact: f64,
+    at: impl Fn() -> String,
+) {
+    let factor = faces
+        .factor_of(e, r)
+        .expect("every wall particle has a face");
+    assert!(
+        (factor / exact - 1.0).abs() < 1e-12,
+        "{}: {factor} against {exact}",
+        at()
+    );
 }
 
 /// No slip at the walls' surface (`mps.wall_surface_no_slip`): for simple shear u = (a y, 0)
