@@ -1,8 +1,10 @@
 //! Takes a recorded 3D or 2D run up from one of its checkpoints with settings changed, and
 //! steps it on, printing the fluid's kinetic energy, its largest speed and its non-flowing
 //! share as it goes. The cheap way to ask "what does this one setting do to that state"
-//! (docs/validation.md, "Holding still": the L-box's stirred thin layer from its 20 s
-//! checkpoint) without rerunning the flow that led there. Nothing is written.
+//! (docs/validation.md, "The 3D thin layer under revision 2, from its checkpoint": the
+//! L-box's stirred layer from its 20 s checkpoint) without rerunning the flow that led there.
+//! Nothing is written. With no setting changed it says whether the file's checkpoint at the
+//! last step was reproduced bit for bit, as `runner verify` would.
 //!
 //! Usage: cargo run --release --example step_from -- FILE.mcap --at T_S --for S
 //!        [--every S] [--threads N] [--metric NAME] [KEY=VALUE ...]
@@ -41,6 +43,7 @@ fn main() {
                 metric = Some(args.get(i + 1).expect("--metric needs a name").clone());
                 i += 1;
             }
+            a if a.starts_with("--") => panic!("unknown option {a}"),
             a if a.contains('=') => sets.push(a.to_string()),
             a => file = Some(PathBuf::from(a)),
         }
