@@ -12,8 +12,8 @@
 //! `mps.pressure_smoothing_time_s` and
 //! `mps.particle_shifting` (with `mps.particle_shifting_limit`) at 0 (and under the standard
 //! scheme), `mps.pressure_floor_pa` at 0, `mps.yield_penalty_pa_s` at 0 (with
-//! `mps.yield_max_iterations` and `mps.yield_tolerance_1_s`), `mps.yield_velocity_fraction` at
-//! 0, `mps.corrected_strain_rate`, `mps.wall_surface_no_slip`, `mps.wall_face_normals`, `mps.quadratic_strain_rate`
+//! `mps.yield_max_iterations` and `mps.yield_tolerance_1_s`), `mps.yield_velocity_fraction` and
+//! `mps.yield_anderson_depth` at 0, `mps.corrected_strain_rate`, `mps.wall_surface_no_slip`, `mps.wall_face_normals`, `mps.quadratic_strain_rate`
 //! and `mps.exact_projection` (also under the standard scheme) false, `stop.rest_*` without
 //! `stop.rest_metric`, null `mps.wall_collision_*`, `mps.strain_rate_radius`,
 //! `mps.viscous_laplacian_radius`, `time.dt_min_s`, `stop.max_ghost_particles` and the rod's,
@@ -95,6 +95,10 @@ pub fn canonical_text<S: SceneSection>(manifest: &Manifest<S>) -> String {
         // 0 is the yield solve's velocity steps at the viscous tolerance, as before the field.
         if manifest.mps.yield_velocity_fraction == 0.0 {
             mps.remove("yield_velocity_fraction");
+        }
+        // 0 is the plain iterations, as before the field.
+        if manifest.mps.yield_anderson_depth == 0 {
+            mps.remove("yield_anderson_depth");
         }
         // The radius is read only with the regularisation on, the limit only with shifting.
         if !mps.contains_key("pressure_regularisation") {

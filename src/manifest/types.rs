@@ -349,6 +349,10 @@ pub struct Mps {
     /// u steps); 0 = solve to `viscosity_tolerance`, as before.
     #[serde(default)]
     pub yield_velocity_fraction: f64,
+    /// Anderson acceleration of the yield solve's iterations over the last this many of them
+    /// (`src/mps/anderson.rs`); 0 = plain iterations, as before.
+    #[serde(default)]
+    pub yield_anderson_depth: u32,
     /// The yield solve's strain operator corrected so that a uniform stress exerts no force on
     /// an interior particle (`src/mps/yield_solve.rs`, `make_divergence_consistent`; interior:
     /// all neighbours fluid and a number density of at least `surface_threshold` n0). Off: the
@@ -453,6 +457,7 @@ impl Default for Mps {
             yield_tolerance_1_s: default_yield_tolerance_1_s(),
             yield_penalty_adaptive: false,
             yield_velocity_fraction: 0.0,
+            yield_anderson_depth: 0,
             yield_consistent_divergence: false,
             compressibility_1_pa: default_compressibility_1_pa(),
             collision_distance: default_collision_distance(),

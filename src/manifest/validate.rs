@@ -277,6 +277,12 @@ pub fn check<S: SceneSection>(m: &Manifest<S>) -> Vec<Issue> {
             p.yield_velocity_fraction,
             between(0.0, true, 1.0, false),
         );
+        if p.yield_anderson_depth > 20 {
+            c.fail(
+                "mps.yield_anderson_depth",
+                format!("must be <= 20, got {}", p.yield_anderson_depth),
+            );
+        }
         if c.int_at_least("mps.yield_max_iterations", p.yield_max_iterations.into(), 1)
             && p.yield_max_iterations > 10_000
         {
@@ -349,6 +355,12 @@ pub fn check<S: SceneSection>(m: &Manifest<S>) -> Vec<Issue> {
             "mps.yield_velocity_fraction",
             "needs mps.yield_penalty_pa_s > 0 (it sets how far the yield solve's velocity steps go)"
                 .to_string(),
+        );
+    }
+    if p.yield_anderson_depth != 0 && p.yield_penalty_pa_s == 0.0 {
+        c.fail(
+            "mps.yield_anderson_depth",
+            "needs mps.yield_penalty_pa_s > 0 (it accelerates the yield solve)".to_string(),
         );
     }
     if p.quadratic_strain_rate && p.corrected_strain_rate {

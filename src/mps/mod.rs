@@ -1,4 +1,5 @@
 //! The MPS solver core, generic over the dimension `D` (2 or 3).
+pub mod anderson;
 pub mod body;
 pub mod grid;
 pub mod inlet;

@@ -22,6 +22,7 @@
 //! one-step strain rate is small; gamma = 0 there exactly. The multiplier is carried from step
 //! to step (it changes little): a still tank then needs one iteration per step, a settling
 //! heap 20-50 (docs/validation.md, "A rigid state by an augmented Lagrangian").
+use super::anderson::Anderson;
 use super::grid::{Neighbours, entry_index};
 use super::kernel::RefValues;
 use super::operators::{
@@ -62,6 +63,9 @@ pub struct YieldSolve {
     /// (the gradient's radius) is at least `ratio` n0 (see [`StrainOperator::build`]).
     /// `None`: the operator as built.
     pub consistent_divergence: Option<f64>,
+    /// Anderson acceleration of the iterations over the last this many of them
+    /// ([`super::anderson`]); 0: plain iterations.
+    pub anderson_depth: u32,
 }
 
 /// Residual balancing (He, Yang & Wang 2000; Boyd et al. 2011, sec. 3.4.1): the penalty is
@@ -502,7 +506,9 @@ pub(crate) fn solve<const D: usize>(
         relative_residual: 0.0,
         converged: true,
     };
-    for _ in 0..settings.max_iterations {
+    let mut anderson =
+        (settings.anderson_depth > 0).then(|| Anderson::new(settings.anderson_depth as usize));
+    for iteration in 0..settings.max_iterations {
         let load: Vec<Tensor<D>> =
             map_particles(n, |k| lambda[k] + (op.constant[k] - gamma[k]) * r);
         let div = op.apply_transpose(&load);
@@ -542,6 +548,8 @@ pub(crate) fn solve<const D: usize>(
             (g, theta - g * r)
         });
         let change = max_by(n, |k| (next[k].0 - gamma[k]).norm());
+        // The iteration's input, in Pa: (lambda, r gamma).
+        let input = anderson.as_ref().map(|_| pack(&lambda, &gamma, r));
         gamma = next.iter().map(|v| v.0).collect();
         lambda = next.into_iter().map(|v| v.1).collect();
         let mismatch = max_by(n, |k| (e[k] + op.constant[k] - gamma[k]).norm());
@@ -559,7 +567,21 @@ pub(crate) fn solve<const D: usize>(
             if balanced != r {
                 r = balanced;
                 inv_diag = inverse_diagonal(r);
+                // Another penalty is another map: the earlier iterates say nothing of it.
+                if let Some(anderson) = &mut anderson {
+                    anderson.restart();
+                }
+                continue;
             }
+        }
+        // The last iteration's output is the plain one (a consistent u, gamma, lambda).
+        if let (Some(anderson), Some(input)) = (&mut anderson, input)
+            && iteration + 1 < settings.max_iterations
+        {
+            let image = pack(&lambda, &gamma, r);
+            let (mixed, guess) = anderson.next(&input, &image, x.as_flattened());
+            (lambda, gamma) = unpack(&mixed, r);
+            x.as_flattened_mut().copy_from_slice(&guess);
         }
     }
     YieldOutcome {
@@ -568,6 +590,28 @@ pub(crate) fn solve<const D: usize>(
         penalty_pa_s: if settings.adaptive { r } else { 0.0 },
         solve: report,
     }
+}
+
+/// (lambda_k, r gamma_k) per row, one flat vector (the accelerated iteration's variable).
+fn pack<const D: usize>(lambda: &[Tensor<D>], gamma: &[Tensor<D>], r: f64) -> Vec<f64> {
+    let mut v = Vec::with_capacity(2 * D * D * lambda.len());
+    for (l, g) in lambda.iter().zip(gamma) {
+        v.extend_from_slice(l.as_slice());
+        v.extend((g * r).iter());
+    }
+    v
+}
+
+/// The inverse of [`pack`].
+fn unpack<const D: usize>(v: &[f64], r: f64) -> (Vec<Tensor<D>>, Vec<Tensor<D>>) {
+    v.chunks_exact(2 * D * D)
+        .map(|c| {
+            (
+                Tensor::<D>::from_column_slice(&c[..D * D]),
+                Tensor::<D>::from_column_slice(&c[D * D..]) / r,
+            )
+        })
+        .unzip()
 }
 
 /// Jacobi-preconditioned CG for a matrix given as a product, over vectors of D components

@@ -225,6 +225,7 @@ pub fn run_info(path: &Path, size_bytes: u64, run: &RunFile) -> RunInfo {
                 "yield_tolerance_1_s",
                 "yield_penalty_adaptive",
                 "yield_velocity_fraction",
+                "yield_anderson_depth",
                 "yield_consistent_divergence",
             ] {
                 if let Some(v) = mps.and_then(|mps| mps.get(key)) {

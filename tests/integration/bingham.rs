@@ -282,6 +282,7 @@ const POISEUILLE_SOLVE: YieldSolve = YieldSolve {
     adaptive: false,
     velocity_fraction: 0.0,
     consistent_divergence: None,
+    anderson_depth: 0,
 };
 
 /// Bingham's law with a rigid state (`mps.yield_penalty_pa_s`, the augmented Lagrangian of
@@ -584,5 +585,41 @@ fn inexact_velocity_steps_keep_the_yield_solve_profile() {
     assert!(
         cg_inexact * 10 < cg_exact * 9,
         "inexact steps took {cg_inexact} CG iterations, exact {cg_exact}"
+    );
+}
+
+/// Anderson-accelerated iterations (`mps.yield_anderson_depth`) solve the same problem: the
+/// steady profile is the plain iterations' to within the solve's tolerance, with the same
+/// rigid plug, in fewer CG iterations (each iteration's u step is a CG solve).
+#[test]
+fn anderson_acceleration_keeps_the_yield_solve_profile_in_fewer_iterations() {
+    let (tau, eta): (f64, f64) = (100.0, 50.0);
+    let cells = 20;
+    let rheology = Rheology::seed000(eta, tau, 1e-6);
+    let plain = POISEUILLE_SOLVE;
+    let accelerated = YieldSolve {
+        anderson_depth: 5,
+        ..plain
+    };
+    let ((_, u_plain, pi_plain), cg_plain) =
+        bingham_poiseuille_counted(rheology, false, Some(plain), cells, DEFAULT_RADII);
+    let ((_, u_fast, pi_fast), cg_fast) =
+        bingham_poiseuille_counted(rheology, false, Some(accelerated), cells, DEFAULT_RADII);
+    eprintln!("CG iterations: plain {cg_plain}, Anderson {cg_fast}");
+    let rigid = |pi: &[f64]| pi.iter().map(|pi| *pi == 0.0).collect::<Vec<_>>();
+    assert_eq!(rigid(&pi_plain), rigid(&pi_fast), "the plug changed");
+    let apart = u_plain
+        .iter()
+        .zip(&u_fast)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0, f64::max);
+    // Both stop at a strain-rate tolerance: over the half width h = 0.1 m that bounds how far
+    // apart their velocities may be.
+    let bound = plain.tolerance_1_s * 0.1;
+    eprintln!("Anderson: largest velocity difference {apart:.3e} m/s (bound {bound:.1e})");
+    assert!(apart < bound, "velocities {apart} apart, bound {bound}");
+    assert!(
+        cg_fast * 10 < cg_plain * 9,
+        "Anderson took {cg_fast} CG iterations, plain {cg_plain}"
     );
 }

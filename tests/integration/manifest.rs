@@ -935,6 +935,7 @@ fn invalid_values_are_named_and_located() {
     let exact = ok_with(&heap, &yield_solve);
     let mut sets = yield_solve.to_vec();
     sets.push("mps.yield_velocity_fraction=0");
+    sets.push("mps.yield_anderson_depth=0");
     assert_eq!(ok_with(&heap, &sets).hash_hex, exact.hash_hex);
     // Inexact steps, then the consistent divergence, on top: each changes the hash and is
     // named in the canonical form.
@@ -947,6 +948,7 @@ fn invalid_values_are_named_and_located() {
             "mps.yield_consistent_divergence=true",
             r#""yield_consistent_divergence":true"#,
         ),
+        ("mps.yield_anderson_depth=5", r#""yield_anderson_depth":5"#),
     ] {
         let before = ok_with(&heap, &sets).hash_hex;
         sets.push(set);

@@ -973,6 +973,7 @@ fn checkerboard_left(smoothing_s: f64) -> (f64, f64) {
         adaptive: true,
         velocity_fraction: 0.1,
         consistent_divergence: None,
+        anderson_depth: 0,
     });
     cfg.wall_surface_no_slip = true;
     cfg.pressure_scheme = PressureScheme::Incremental;

@@ -175,10 +175,43 @@ fn a_consistent_divergence_stops_the_heap_on_any_thread_count() {
     assert_eq!(one.summary.checkpoints, result.summary.checkpoints);
 }
 
+/// Anderson-accelerated iterations (`mps.yield_anderson_depth`) under the quiet yield set:
+/// the heap comes to rest in the full-Bingham band, and the accelerated iterates (mixed with
+/// order-fixed dot products) are the same bits on one thread as on two.
+#[test]
+fn an_anderson_accelerated_yield_solve_stops_the_heap_on_any_thread_count() {
+    let dir = tempfile::tempdir().unwrap();
+    let (resolved, result, run) = heap(
+        &[
+            "mps.strain_rate_radius=1.5",
+            "mps.yield_penalty_adaptive=true",
+            "mps.yield_velocity_fraction=0.1",
+            "mps.yield_anderson_depth=5",
+            "mps.yield_max_iterations=200",
+        ],
+        &dir.path().join("two"),
+    );
+    let summary = run.summary.as_ref().unwrap();
+    let (front_m, stop_s) = (
+        summary.metrics["front_position_m"],
+        summary.metrics["stop_time_s"],
+    );
+    eprintln!("front {front_m:.4} m, stopped at {stop_s:.2} s");
+    assert!(!summary.stop.is_empty(), "not stopped by the rest rule");
+    // One spacing (0.02 m) either side of the full-Bingham 0.97-1.04 m (3.1-12.5 mm cells);
+    // measured 1.0129 m, stopped at 2.00 s.
+    assert!(
+        (0.95..=1.06).contains(&front_m),
+        "front {front_m} m against the full-Bingham 0.97-1.04 m"
+    );
+    let one = common::run_completed(&resolved, &dir.path().join("one"), 1);
+    assert_eq!(one.summary.checkpoints, result.summary.checkpoints);
+}
+
 /// The yield solve's fields are refused where they cannot work, naming the field.
 #[test]
 fn the_yield_solve_is_refused_without_its_conditions() {
-    let cases: [(&[&str], &str); 8] = [
+    let cases: [(&[&str], &str); 10] = [
         (
             &[
                 "mps.yield_penalty_pa_s=1000",
@@ -214,6 +247,16 @@ fn the_yield_solve_is_refused_without_its_conditions() {
         (
             &["mps.yield_consistent_divergence=true"],
             "mps.yield_consistent_divergence",
+        ),
+        (&["mps.yield_anderson_depth=5"], "mps.yield_anderson_depth"),
+        (
+            &[
+                "mps.yield_penalty_pa_s=1000",
+                "mps.wall_surface_no_slip=true",
+                "fluid.stress_gradient_term=false",
+                "mps.yield_anderson_depth=21",
+            ],
+            "mps.yield_anderson_depth",
         ),
         (
             &[
