@@ -21,6 +21,9 @@ pub(crate) struct Anderson {
     last: Option<Evaluation>,
     /// Differences of residuals, images and auxiliary outputs, oldest first.
     history: VecDeque<(Vec<f64>, Vec<f64>, Vec<f64>)>,
+    /// The residual differences' dot products, row a column b for history entries a and b
+    /// (each computed once, when its newer entry came).
+    gram: VecDeque<VecDeque<f64>>,
 }
 
 /// One evaluation of the map: its image, residual (image - input), auxiliary output and
@@ -42,13 +45,19 @@ impl Anderson {
             depth,
             last: None,
             history: VecDeque::new(),
+            gram: VecDeque::new(),
         }
     }
 
     /// Forgets every earlier iterate (the map changed, e.g. a new penalty).
     pub(crate) fn restart(&mut self) {
         self.last = None;
+        self.forget();
+    }
+
+    fn forget(&mut self) {
         self.history.clear();
+        self.gram.clear();
     }
 
     /// The next input after evaluating the map at `input` (image `image`, auxiliary output
@@ -64,16 +73,25 @@ impl Anderson {
         let norm2 = dot(&residual, &residual);
         if let Some(last) = self.last.take() {
             if norm2 > last.norm2 {
-                self.history.clear();
+                self.forget();
             } else {
                 let diff = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x - y).collect();
-                self.history.push_back((
-                    diff(&residual, &last.residual),
-                    diff(image, &last.image),
-                    diff(aux, &last.aux),
-                ));
+                let df: Vec<f64> = diff(&residual, &last.residual);
+                let mut row: VecDeque<f64> =
+                    self.history.iter().map(|(fb, _, _)| dot(&df, fb)).collect();
+                row.push_back(dot(&df, &df));
+                for (earlier, &v) in self.gram.iter_mut().zip(&row) {
+                    earlier.push_back(v);
+                }
+                self.gram.push_back(row);
+                self.history
+                    .push_back((df, diff(image, &last.image), diff(aux, &last.aux)));
                 if self.history.len() > self.depth {
                     self.history.pop_front();
+                    self.gram.pop_front();
+                    for row in &mut self.gram {
+                        row.pop_front();
+                    }
                 }
             }
         }
@@ -87,22 +105,18 @@ impl Anderson {
         if m == 0 {
             return (image.to_vec(), aux.to_vec());
         }
-        let mut gram = vec![0.0; m * m];
-        let mut rhs = vec![0.0; m];
-        for (a, (fa, _, _)) in self.history.iter().enumerate() {
-            rhs[a] = dot(fa, &residual);
-            for (b, (fb, _, _)) in self.history.iter().enumerate().take(a + 1) {
-                let v = dot(fa, fb);
-                gram[a * m + b] = v;
-                gram[b * m + a] = v;
-            }
-        }
+        let mut gram: Vec<f64> = self.gram.iter().flatten().copied().collect();
+        let mut rhs: Vec<f64> = self
+            .history
+            .iter()
+            .map(|(fa, _, _)| dot(fa, &residual))
+            .collect();
         let scale = (0..m).map(|a| gram[a * m + a]).fold(0.0, f64::max);
         for a in 0..m {
             gram[a * m + a] += REGULARISATION * scale;
         }
         let Some(c) = cholesky_solve(&mut gram, &mut rhs, m) else {
-            self.history.clear();
+            self.forget();
             return (image.to_vec(), aux.to_vec());
         };
         let mut next = image.to_vec();
