@@ -8,6 +8,7 @@
 //! auxiliary vector that the map also produces (e.g. the velocity a step solved for) is mixed
 //! with the same c: that is a good start for the next evaluation. Every dot product is an
 //! order-fixed sum ([`sum_by`]), so the accelerated iterates are the same on any thread count.
+use super::dense::DenseCholesky;
 use super::reduce::sum_by;
 use std::collections::VecDeque;
 
@@ -106,7 +107,7 @@ impl Anderson {
             return (image.to_vec(), aux.to_vec());
         }
         let mut gram: Vec<f64> = self.gram.iter().flatten().copied().collect();
-        let mut rhs: Vec<f64> = self
+        let rhs: Vec<f64> = self
             .history
             .iter()
             .map(|(fa, _, _)| dot(fa, &residual))
@@ -115,10 +116,12 @@ impl Anderson {
         for a in 0..m {
             gram[a * m + a] += REGULARISATION * scale;
         }
-        let Some(c) = cholesky_solve(&mut gram, &mut rhs, m) else {
+        let Some(normal) = DenseCholesky::factor(gram, m, false) else {
             self.forget();
             return (image.to_vec(), aux.to_vec());
         };
+        let mut c = vec![0.0; m];
+        normal.solve(&rhs, &mut c);
         let mut next = image.to_vec();
         let mut guess = aux.to_vec();
         for (ca, (_, dg, da)) in c.iter().zip(&self.history) {
@@ -127,44 +130,6 @@ impl Anderson {
         }
         (next, guess)
     }
-}
-
-/// Solves the symmetric positive definite m x m system in place (row-major `a`); `None` when a
-/// pivot is not positive (the differences are linearly dependent to rounding).
-fn cholesky_solve(a: &mut [f64], b: &mut [f64], m: usize) -> Option<Vec<f64>> {
-    for j in 0..m {
-        let mut d = a[j * m + j];
-        for k in 0..j {
-            d -= a[j * m + k] * a[j * m + k];
-        }
-        if d.is_nan() || d <= 0.0 {
-            return None;
-        }
-        let d = d.sqrt();
-        a[j * m + j] = d;
-        for i in j + 1..m {
-            let mut v = a[i * m + j];
-            for k in 0..j {
-                v -= a[i * m + k] * a[j * m + k];
-            }
-            a[i * m + j] = v / d;
-        }
-    }
-    for i in 0..m {
-        let mut v = b[i];
-        for k in 0..i {
-            v -= a[i * m + k] * b[k];
-        }
-        b[i] = v / a[i * m + i];
-    }
-    for i in (0..m).rev() {
-        let mut v = b[i];
-        for k in i + 1..m {
-            v -= a[k * m + i] * b[k];
-        }
-        b[i] = v / a[i * m + i];
-    }
-    Some(b.to_vec())
 }
 
 #[cfg(test)]
@@ -217,15 +182,5 @@ mod tests {
             accelerated * 5 < plain,
             "accelerated {accelerated}, plain {plain}"
         );
-    }
-
-    #[test]
-    fn cholesky_solves_a_small_system() {
-        let mut a = vec![4.0, 2.0, 2.0, 3.0];
-        let mut b = vec![2.0, 1.0];
-        let x = cholesky_solve(&mut a, &mut b, 2).unwrap();
-        assert!((x[0] - 0.5).abs() < 1e-15 && x[1].abs() < 1e-15);
-        let mut singular = vec![1.0, 1.0, 1.0, 1.0];
-        assert!(cholesky_solve(&mut singular, &mut [1.0, 1.0], 2).is_none());
     }
 }

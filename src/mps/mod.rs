@@ -1,6 +1,7 @@
 //! The MPS solver core, generic over the dimension `D` (2 or 3).
 pub mod anderson;
 pub mod body;
+pub(crate) mod dense;
 pub mod grid;
 pub mod inlet;
 pub mod kernel;

@@ -13,6 +13,7 @@
 //! Determinism (docs/design.md section 6): aggregates follow from the cells alone; every coarse
 //! entry and every restricted value is summed over the members of an aggregate in ascending index
 //! order; products are gathered row by row. Nothing depends on the thread count.
+use super::dense::DenseCholesky;
 use super::sparse::CsrMatrix;
 use rayon::prelude::*;
 
@@ -76,7 +77,7 @@ impl Multigrid {
             levels.push(coarse);
             cells = coarse_cells;
         }
-        let coarsest = DenseCholesky::new(levels.last().map_or(fine, |l| &l.matrix));
+        let coarsest = dense_cholesky(levels.last().map_or(fine, |l| &l.matrix));
         Self {
             fine_inv_diagonal,
             over_correction,
@@ -255,55 +256,15 @@ fn inverse(diagonal: &[f64]) -> Vec<f64> {
     diagonal.iter().map(|d| 1.0 / d).collect()
 }
 
-/// Dense Cholesky factor L (A = L L^T) of a small SPD matrix, row-major.
-struct DenseCholesky {
-    n: usize,
-    lower: Vec<f64>,
-}
-
-impl DenseCholesky {
-    fn new(a: &CsrMatrix) -> Self {
-        let n = a.rows();
-        let mut l = vec![0.0; n * n];
-        for i in 0..n {
-            l[i * n + i] = a.diagonal[i];
-            for k in a.row_offsets[i]..a.row_offsets[i + 1] {
-                l[i * n + a.columns[k] as usize] = a.values[k];
-            }
-        }
-        // In-place factorisation of the lower triangle, row by row.
-        for i in 0..n {
-            for j in 0..=i {
-                let mut s = l[i * n + j];
-                for k in 0..j {
-                    s -= l[i * n + k] * l[j * n + k];
-                }
-                l[i * n + j] = if i == j {
-                    // SPD in exact arithmetic; guard against round-off on a tiny pivot.
-                    s.max(f64::MIN_POSITIVE).sqrt()
-                } else {
-                    s / l[j * n + j]
-                };
-            }
-        }
-        Self { n, lower: l }
-    }
-
-    fn solve(&self, b: &[f64], x: &mut [f64]) {
-        let (n, l) = (self.n, &self.lower);
-        for i in 0..n {
-            let mut s = b[i];
-            for k in 0..i {
-                s -= l[i * n + k] * x[k];
-            }
-            x[i] = s / l[i * n + i];
-        }
-        for i in (0..n).rev() {
-            let mut s = x[i];
-            for k in i + 1..n {
-                s -= l[k * n + i] * x[k];
-            }
-            x[i] = s / l[i * n + i];
+/// The dense factor of a small SPD matrix in CSR form (the coarsest level).
+fn dense_cholesky(a: &CsrMatrix) -> DenseCholesky {
+    let n = a.rows();
+    let mut dense = vec![0.0; n * n];
+    for i in 0..n {
+        dense[i * n + i] = a.diagonal[i];
+        for k in a.row_offsets[i]..a.row_offsets[i + 1] {
+            dense[i * n + a.columns[k] as usize] = a.values[k];
         }
     }
+    DenseCholesky::factor(dense, n, true).expect("a guarded factorisation always succeeds")
 }
