@@ -551,75 +551,72 @@ fn viscosity_ratio_1000_is_stable_at_the_seed_time_step() {
     );
 }
 
+/// The Poiseuille flow (20 cells, 100 Pa, 50 Pa s) under the yield solve `base` and under
+/// `variant`: the same rigid plug, velocities within `bound_m_s` of each other, and the variant
+/// in under 0.9 times the CG iterations. Returns both counts.
+fn same_profile_in_fewer_iterations(
+    base: YieldSolve,
+    variant: YieldSolve,
+    bound_m_s: f64,
+    name: &str,
+) -> (u64, u64) {
+    let rheology = Rheology::seed000(50.0, 100.0, 1e-6);
+    let run = |solve| bingham_poiseuille_counted(rheology, false, Some(solve), 20, DEFAULT_RADII);
+    let ((_, u_base, pi_base), cg_base) = run(base);
+    let ((_, u_variant, pi_variant), cg_variant) = run(variant);
+    eprintln!("CG iterations: {cg_base}, {name} {cg_variant}");
+    let rigid = |pi: &[f64]| pi.iter().map(|pi| *pi == 0.0).collect::<Vec<_>>();
+    assert_eq!(
+        rigid(&pi_base),
+        rigid(&pi_variant),
+        "{name}: the plug changed"
+    );
+    let apart = u_base
+        .iter()
+        .zip(&u_variant)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0, f64::max);
+    eprintln!("{name}: largest velocity difference {apart:.3e} m/s (bound {bound_m_s:.1e})");
+    assert!(
+        apart < bound_m_s,
+        "{name}: velocities {apart} apart, bound {bound_m_s}"
+    );
+    assert!(
+        cg_variant * 10 < cg_base * 9,
+        "{name} took {cg_variant} CG iterations, against {cg_base}"
+    );
+    (cg_base, cg_variant)
+}
+
 /// Inexact u steps (`mps.yield_velocity_fraction`): each CG solve of the yield solve stops
 /// at a residual that bounds the strain rate it leaves to a fraction of the solve's
 /// tolerance, so the steady profile is the exact steps' to within what that tolerance
-/// allows, with the same rigid plug.
+/// allows, with the same rigid plug. Measured: 123 890 and 89 073 CG iterations.
 #[test]
 fn inexact_velocity_steps_keep_the_yield_solve_profile() {
-    let (tau, eta): (f64, f64) = (100.0, 50.0);
-    let cells = 20;
-    let rheology = Rheology::seed000(eta, tau, 1e-6);
     let exact_steps = POISEUILLE_SOLVE;
     let inexact_steps = YieldSolve {
         velocity_fraction: 0.1,
         ..exact_steps
     };
-    let ((_, u_exact, pi_exact), cg_exact) =
-        bingham_poiseuille_counted(rheology, false, Some(exact_steps), cells, DEFAULT_RADII);
-    let ((_, u_inexact, pi_inexact), cg_inexact) =
-        bingham_poiseuille_counted(rheology, false, Some(inexact_steps), cells, DEFAULT_RADII);
-    eprintln!("CG iterations: exact u steps {cg_exact}, inexact {cg_inexact}");
-    let rigid = |pi: &[f64]| pi.iter().map(|pi| *pi == 0.0).collect::<Vec<_>>();
-    assert_eq!(rigid(&pi_exact), rigid(&pi_inexact), "the plug changed");
-    let apart = u_exact
-        .iter()
-        .zip(&u_inexact)
-        .map(|(a, b)| (a - b).abs())
-        .fold(0.0, f64::max);
     // A strain-rate error below the fraction of the tolerance over the half width h = 0.1 m.
     let bound = inexact_steps.velocity_fraction * exact_steps.tolerance_1_s * 0.1;
-    eprintln!("inexact u steps: largest velocity difference {apart:.3e} m/s (bound {bound:.1e})");
-    assert!(apart < bound, "velocities {apart} apart, bound {bound}");
-    // Measured 123 890 and 89 073.
-    assert!(
-        cg_inexact * 10 < cg_exact * 9,
-        "inexact steps took {cg_inexact} CG iterations, exact {cg_exact}"
-    );
+    same_profile_in_fewer_iterations(exact_steps, inexact_steps, bound, "inexact u steps");
 }
 
 /// Anderson-accelerated iterations (`mps.yield_anderson_depth`) solve the same problem: the
 /// steady profile is the plain iterations' to within the solve's tolerance, with the same
-/// rigid plug, in fewer CG iterations (each iteration's u step is a CG solve).
+/// rigid plug, in fewer CG iterations (each iteration's u step is a CG solve). Measured:
+/// 123 890 and 32 221 CG iterations, 1.2e-12 m/s apart.
 #[test]
 fn anderson_acceleration_keeps_the_yield_solve_profile_in_fewer_iterations() {
-    let (tau, eta): (f64, f64) = (100.0, 50.0);
-    let cells = 20;
-    let rheology = Rheology::seed000(eta, tau, 1e-6);
     let plain = POISEUILLE_SOLVE;
     let accelerated = YieldSolve {
         anderson_depth: 5,
         ..plain
     };
-    let ((_, u_plain, pi_plain), cg_plain) =
-        bingham_poiseuille_counted(rheology, false, Some(plain), cells, DEFAULT_RADII);
-    let ((_, u_fast, pi_fast), cg_fast) =
-        bingham_poiseuille_counted(rheology, false, Some(accelerated), cells, DEFAULT_RADII);
-    eprintln!("CG iterations: plain {cg_plain}, Anderson {cg_fast}");
-    let rigid = |pi: &[f64]| pi.iter().map(|pi| *pi == 0.0).collect::<Vec<_>>();
-    assert_eq!(rigid(&pi_plain), rigid(&pi_fast), "the plug changed");
-    let apart = u_plain
-        .iter()
-        .zip(&u_fast)
-        .map(|(a, b)| (a - b).abs())
-        .fold(0.0, f64::max);
     // Both stop at a strain-rate tolerance: over the half width h = 0.1 m that bounds how far
     // apart their velocities may be.
     let bound = plain.tolerance_1_s * 0.1;
-    eprintln!("Anderson: largest velocity difference {apart:.3e} m/s (bound {bound:.1e})");
-    assert!(apart < bound, "velocities {apart} apart, bound {bound}");
-    assert!(
-        cg_fast * 10 < cg_plain * 9,
-        "Anderson took {cg_fast} CG iterations, plain {cg_plain}"
-    );
+    same_profile_in_fewer_iterations(plain, accelerated, bound, "Anderson");
 }

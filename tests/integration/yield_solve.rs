@@ -133,27 +133,12 @@ fn an_adaptive_penalty_brings_the_heap_to_rest_and_replays_from_its_checkpoints(
     common::assert_replays(&result.path, Some(flowing));
 }
 
-/// The strain operator corrected so that a uniform stress exerts no force on an interior
-/// particle (`mps.yield_consistent_divergence`): the first-shell heap is stopped by its rest
-/// rule within the full-Bingham range, and the correction (a CG solve per step) gives the same
-/// bits on one and two threads. MEASURED (docs/validation.md, "A divergence consistent for a
-/// uniform stress"): stopped at 2.23 s at 0.983 m (3.18 s, 0.973 m from a build that summed
-/// the column sums in another order: the heap is chaotic in round-off), where without it
-/// 2.27 s and 1.016 m; at
-/// this coarse spacing one round-off twin kept its last 0.5-1 % moving at 0.2-4 mm/s (the
-/// others reach 100 % non-flowing by 2.3 s), so no speed limit is asserted here.
-#[test]
-fn a_consistent_divergence_stops_the_heap_on_any_thread_count() {
+/// The heap under `extra` on two threads: stopped by its rest rule before the 6 s cap with
+/// its front one spacing (0.02 m) either side of the full-Bingham 0.97-1.04 m (3.1-12.5 mm
+/// cells), and the same checkpoints on one thread.
+fn heap_stops_on_any_thread_count(extra: &[&str]) {
     let dir = tempfile::tempdir().unwrap();
-    let (resolved, result, run) = heap(
-        &[
-            "mps.strain_rate_radius=1.5",
-            "mps.yield_penalty_adaptive=true",
-            "mps.yield_velocity_fraction=0.1",
-            "mps.yield_consistent_divergence=true",
-        ],
-        &dir.path().join("two"),
-    );
+    let (resolved, result, run) = heap(extra, &dir.path().join("two"));
     let summary = run.summary.as_ref().unwrap();
     let (front_m, stop_s) = (
         summary.metrics["front_position_m"],
@@ -166,7 +151,6 @@ fn a_consistent_divergence_stops_the_heap_on_any_thread_count() {
     );
     assert!(!summary.stop.is_empty(), "not stopped by the rest rule");
     assert!(stop_s < 6.0, "stopped only at the cap");
-    // One spacing (0.02 m) either side of the full-Bingham 0.97-1.04 m (3.1-12.5 mm cells).
     assert!(
         (0.95..=1.06).contains(&front_m),
         "front {front_m} m against the full-Bingham 0.97-1.04 m"
@@ -175,37 +159,38 @@ fn a_consistent_divergence_stops_the_heap_on_any_thread_count() {
     assert_eq!(one.summary.checkpoints, result.summary.checkpoints);
 }
 
+/// The strain operator corrected so that a uniform stress exerts no force on an interior
+/// particle (`mps.yield_consistent_divergence`): the first-shell heap is stopped by its rest
+/// rule within the full-Bingham range, and the correction (a CG solve per step) gives the same
+/// bits on one and two threads. MEASURED (docs/validation.md, "A divergence consistent for a
+/// uniform stress"): stopped at 2.23 s at 0.983 m (3.18 s, 0.973 m from a build that summed
+/// the column sums in another order: the heap is chaotic in round-off), where without it
+/// 2.27 s and 1.016 m; at
+/// this coarse spacing one round-off twin kept its last 0.5-1 % moving at 0.2-4 mm/s (the
+/// others reach 100 % non-flowing by 2.3 s), so no speed limit is asserted here.
+#[test]
+fn a_consistent_divergence_stops_the_heap_on_any_thread_count() {
+    heap_stops_on_any_thread_count(&[
+        "mps.strain_rate_radius=1.5",
+        "mps.yield_penalty_adaptive=true",
+        "mps.yield_velocity_fraction=0.1",
+        "mps.yield_consistent_divergence=true",
+    ]);
+}
+
 /// Anderson-accelerated iterations (`mps.yield_anderson_depth`) under the quiet yield set:
 /// the heap comes to rest in the full-Bingham band, and the accelerated iterates (mixed with
-/// order-fixed dot products) are the same bits on one thread as on two.
+/// order-fixed dot products) are the same bits on one thread as on two. MEASURED: 1.0129 m,
+/// stopped at 2.00 s.
 #[test]
 fn an_anderson_accelerated_yield_solve_stops_the_heap_on_any_thread_count() {
-    let dir = tempfile::tempdir().unwrap();
-    let (resolved, result, run) = heap(
-        &[
-            "mps.strain_rate_radius=1.5",
-            "mps.yield_penalty_adaptive=true",
-            "mps.yield_velocity_fraction=0.1",
-            "mps.yield_anderson_depth=5",
-            "mps.yield_max_iterations=200",
-        ],
-        &dir.path().join("two"),
-    );
-    let summary = run.summary.as_ref().unwrap();
-    let (front_m, stop_s) = (
-        summary.metrics["front_position_m"],
-        summary.metrics["stop_time_s"],
-    );
-    eprintln!("front {front_m:.4} m, stopped at {stop_s:.2} s");
-    assert!(!summary.stop.is_empty(), "not stopped by the rest rule");
-    // One spacing (0.02 m) either side of the full-Bingham 0.97-1.04 m (3.1-12.5 mm cells);
-    // measured 1.0129 m, stopped at 2.00 s.
-    assert!(
-        (0.95..=1.06).contains(&front_m),
-        "front {front_m} m against the full-Bingham 0.97-1.04 m"
-    );
-    let one = common::run_completed(&resolved, &dir.path().join("one"), 1);
-    assert_eq!(one.summary.checkpoints, result.summary.checkpoints);
+    heap_stops_on_any_thread_count(&[
+        "mps.strain_rate_radius=1.5",
+        "mps.yield_penalty_adaptive=true",
+        "mps.yield_velocity_fraction=0.1",
+        "mps.yield_anderson_depth=5",
+        "mps.yield_max_iterations=200",
+    ]);
 }
 
 /// The yield solve's fields are refused where they cannot work, naming the field.
