@@ -7,9 +7,9 @@
 //! g_k - dG c with c = argmin |f_k - dF c| (normal equations, a tiny m x m system). An
 //! auxiliary vector that the map also produces (e.g. the velocity a step solved for) is mixed
 //! with the same c: that is a good start for the next evaluation. Every dot product is an
-//! order-fixed sum ([`sum_by`]), so the accelerated iterates are the same on any thread count.
+//! order-fixed sum ([`dot`]), so the accelerated iterates are the same on any thread count.
 use super::dense::DenseCholesky;
-use super::reduce::sum_by;
+use super::reduce::dot;
 use std::collections::VecDeque;
 
 /// Relative Tikhonov term on the normal equations' diagonal: keeps them solvable when two
@@ -34,10 +34,6 @@ struct Evaluation {
     residual: Vec<f64>,
     aux: Vec<f64>,
     norm2: f64,
-}
-
-fn dot(u: &[f64], v: &[f64]) -> f64 {
-    sum_by(u.len(), |i| u[i] * v[i])
 }
 
 impl Anderson {
