@@ -14,9 +14,8 @@
 //! same two runs under revision 2 were minted: the 2D heap as shipped and the 3D slump.
 //! When revision 3 gave the quiet yield set Anderson-accelerated iterations with a cap of 200
 //! (`mps.yield_anderson_depth`, `mps.yield_max_iterations`), the revision-2 pair took
-//! `mps.yield_anderson_depth=0` and `mps.yield_max_iterations=50` (the revision-1 pair too),
-//! with which they give their values before, and the same two runs under revision 3 were
-//! minted.
+//! `mps.yield_anderson_depth=0` and `mps.yield_max_iterations=50`, with which they give their
+//! values before, and the same two runs under revision 3 were minted.
 use crate::common;
 
 /// (experiment file, overrides, final checkpoint SHA-256).
@@ -119,8 +118,6 @@ const CASES: &[(&str, &[&str], &str)] = &[
             "time.end_s=0.3",
             "mps.preset=quiet",
             "mps.wall_face_normals=false",
-            "mps.yield_anderson_depth=0",
-            "mps.yield_max_iterations=50",
         ],
         "c94cb8b6def76836fe50de86644605632395b1c20e0ecd16016fd39cc374c261",
     ),
@@ -132,8 +129,6 @@ const CASES: &[(&str, &[&str], &str)] = &[
             "scene.lift_height_m=0.05",
             "mps.preset=quiet",
             "mps.wall_face_normals=false",
-            "mps.yield_anderson_depth=0",
-            "mps.yield_max_iterations=50",
         ],
         "f3e6279cbf766c7cf7d6e3da9b62076f1dbb3e196af3c73b28ba708d8b114483",
     ),
