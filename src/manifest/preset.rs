@@ -55,13 +55,8 @@ impl PresetName {
 ///    fitted to a particle's wall neighbours tilts when the particle is not above a wall
 ///    particle, and its no-slip factor then grips the bottom row 5-17 % too hard, which kept
 ///    yielded layers thinner than about a spacing rigid (docs/validation.md, "The wall's
-///    grip");
-/// 3. `quiet` with a yield stress also sets `mps.yield_anderson_depth: 5` and
-///    `mps.yield_max_iterations: 200`: the plain iterations stopped at their cap of 50
-///    without converging in 81 % of the 10 mm heap's flowing steps; accelerated, every step
-///    converges, in 0.76 times the time a step (docs/validation.md, "Anderson-accelerated
-///    yield iterations").
-pub const PRESET_REVISION: u32 = 3;
+///    grip").
+pub const PRESET_REVISION: u32 = 2;
 
 /// The revision a run file records (`manifest.preset_revision`, `None` where absent): 1 for a
 /// file from before revisions; an error for one this build does not know.
@@ -116,12 +111,6 @@ fn quiet_values(target: Target, revision: u32) -> Vec<(&'static str, Value)> {
         ]);
         if revision >= 2 {
             v.push(("mps.wall_face_normals", json!(true)));
-        }
-        if revision >= 3 {
-            v.extend([
-                ("mps.yield_anderson_depth", json!(5)),
-                ("mps.yield_max_iterations", json!(200)),
-            ]);
         }
     }
     v

@@ -12,10 +12,6 @@
 //! (`mps.wall_face_normals`), the two preset cases took `mps.wall_face_normals=false`, with
 //! which they give their values before (so the revision changed that field alone), and the
 //! same two runs under revision 2 were minted: the 2D heap as shipped and the 3D slump.
-//! When revision 3 gave the quiet yield set Anderson-accelerated iterations with a cap of 200
-//! (`mps.yield_anderson_depth`, `mps.yield_max_iterations`), the revision-2 pair took
-//! `mps.yield_anderson_depth=0` and `mps.yield_max_iterations=50`, with which they give their
-//! values before, and the same two runs under revision 3 were minted.
 use crate::common;
 
 /// (experiment file, overrides, final checkpoint SHA-256).
@@ -133,16 +129,10 @@ const CASES: &[(&str, &[&str], &str)] = &[
         "f3e6279cbf766c7cf7d6e3da9b62076f1dbb3e196af3c73b28ba708d8b114483",
     ),
     // The same two under the preset's revision 2 (the walls' own faces), minted with it: the
-    // heap as shipped (the 2D default) and the slump under `mps.preset=quiet`; revision 3's
-    // fields set back.
+    // heap as shipped (the 2D default) and the slump under `mps.preset=quiet`.
     (
         "column_collapse_2d.yaml",
-        &[
-            "spacing_m=0.02",
-            "time.end_s=0.3",
-            "mps.yield_anderson_depth=0",
-            "mps.yield_max_iterations=50",
-        ],
+        &["spacing_m=0.02", "time.end_s=0.3"],
         "31e5c53edf502ec079401c160a6f7142ec7b3e3d617a81fe6f26c1aef6e7c817",
     ),
     (
@@ -152,26 +142,8 @@ const CASES: &[(&str, &[&str], &str)] = &[
             "time.end_s=0.4",
             "scene.lift_height_m=0.05",
             "mps.preset=quiet",
-            "mps.yield_anderson_depth=0",
-            "mps.yield_max_iterations=50",
         ],
         "acc690ddbaa93d6c58a550b114b6874020035a360f48ceddc5b913afa0e59b45",
-    ),
-    // The same two under revision 3 (Anderson acceleration, cap 200), minted with it.
-    (
-        "column_collapse_2d.yaml",
-        &["spacing_m=0.02", "time.end_s=0.3"],
-        "4810cefa0035837408d37aa467943ae2a5d1361c3c5c96cd1de57ad6a6b6f1f0",
-    ),
-    (
-        "slump_3d.yaml",
-        &[
-            "spacing_m=0.025",
-            "time.end_s=0.4",
-            "scene.lift_height_m=0.05",
-            "mps.preset=quiet",
-        ],
-        "23f4b8e2cbe4b3115ae268788ce74a216529d8d896e5821c6a32ff809c31b081",
     ),
     // The 2D default (`mps.preset: quiet` for water: incremental scheme, stabilisers,
     // regularisation, surface depth, compressibility 1e-7), minted when it became the default:

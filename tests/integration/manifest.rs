@@ -1313,9 +1313,8 @@ const QUIET_2D_ONLY: [&str; 2] = [
     "mps.compressibility_1_pa=1e-7",
 ];
 /// What it adds for a fluid with a yield stress: the rigid state by the augmented Lagrangian
-/// (the walls' own faces since preset revision 2, Anderson-accelerated iterations with a cap
-/// of 200 since revision 3).
-const QUIET_YIELD: [&str; 9] = [
+/// (the walls' own faces since preset revision 2).
+const QUIET_YIELD: [&str; 7] = [
     "fluid.stress_gradient_term=false",
     "mps.wall_surface_no_slip=true",
     "mps.strain_rate_radius=1.5",
@@ -1323,18 +1322,15 @@ const QUIET_YIELD: [&str; 9] = [
     "mps.yield_penalty_adaptive=true",
     "mps.yield_velocity_fraction=0.1",
     "mps.wall_face_normals=true",
-    "mps.yield_anderson_depth=5",
-    "mps.yield_max_iterations=200",
 ];
 
-/// Preset revision 2 adds the walls' own faces to the quiet yield set, revision 3 Anderson
-/// acceleration with a cap of 200 iterations. Revision 1, under which older files are taken
-/// back up, has neither; water gets neither at any revision.
+/// Preset revision 2 adds the walls' own faces to the quiet yield set. Revision 1, under which
+/// older files are taken back up, has none; water gets none at any revision.
 #[test]
-fn the_quiet_yield_set_takes_the_walls_faces_from_revision_2_and_anderson_from_3() {
+fn the_quiet_yield_set_takes_the_walls_faces_from_revision_2() {
     use mps_runner::experiment::SceneSpec;
     use mps_runner::manifest::{PRESET_REVISION, PresetName};
-    assert_eq!(PRESET_REVISION, 3);
+    assert_eq!(PRESET_REVISION, 2);
     let path = common::experiment("inclined_layer.yaml");
     let text = std::fs::read_to_string(&path).unwrap();
     let at = |sets: &[&str], revision: u32| {
@@ -1346,16 +1342,10 @@ fn the_quiet_yield_set_takes_the_walls_faces_from_revision_2_and_anderson_from_3
     };
     assert!(at(&[], 2).wall_face_normals);
     assert!(!at(&[], 1).wall_face_normals);
-    let accelerated = |m: &manifest::Mps| (m.yield_anderson_depth, m.yield_max_iterations);
-    assert_eq!(accelerated(&at(&[], 3)), (5, 200));
-    assert_eq!(accelerated(&at(&[], 2)), (0, 50));
-    assert!(at(&[], 3).wall_face_normals);
     let r = manifest::from_str::<SceneSpec>(&text, "x", &[]).unwrap();
     assert!(r.manifest.mps.wall_face_normals);
-    assert_eq!(accelerated(&r.manifest.mps), (5, 200));
     let water = load_exp("tank_at_rest.yaml", &["mps.preset=quiet"]).manifest;
     assert!(!water.mps.wall_face_normals);
-    assert_eq!(accelerated(&water.mps), (0, 50));
 }
 
 fn load_exp(file: &str, sets: &[&str]) -> Resolved {
