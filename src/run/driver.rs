@@ -4,6 +4,7 @@ use super::RunError;
 use super::frames::{cloud, diagnostics, time_ns};
 use crate::checkpoint;
 use crate::experiment::{Manifest, RowTracker, experiment_metrics};
+use crate::manifest::PpePreconditioner;
 use crate::mps::{ParticleKind, Solver, StepError};
 use crate::proto::foxglove::PointCloud;
 use crate::proto::mps::v1::{CheckpointHash, Diagnostics, StateCheckpoint, Summary};
@@ -274,7 +275,7 @@ pub fn time_loop<const D: usize>(
         match solver.step(dt_s) {
             Ok(r) => report = Some(r),
             Err(e) => {
-                outcome = Outcome::Failed(e.to_string());
+                outcome = Outcome::Failed(failure_text(&e, m));
                 break;
             }
         }
@@ -339,4 +340,22 @@ pub fn time_loop<const D: usize>(
         summary,
         stop_reason,
     })
+}
+
+/// What a failed step says, with the manifest's remedy where there is one: Jacobi's
+/// iterations grow with the particles across the domain, multigrid's do not.
+fn failure_text(e: &StepError, m: &Manifest) -> String {
+    let text = e.to_string();
+    match e {
+        StepError::PressureNotConverged { .. }
+            if m.mps.ppe_preconditioner == PpePreconditioner::Jacobi =>
+        {
+            format!(
+                "{text}; under the Jacobi preconditioner the iterations grow with the \
+                 particles across the domain, `mps.ppe_preconditioner: multigrid` keeps them \
+                 nearly constant"
+            )
+        }
+        _ => text,
+    }
 }

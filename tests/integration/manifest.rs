@@ -1307,10 +1307,12 @@ const QUIET_ALL: [&str; 5] = [
     "mps.surface_depth=0.5",
     "mps.corrected_strain_rate=true",
 ];
-/// What the quiet set adds in 2D.
-const QUIET_2D_ONLY: [&str; 2] = [
+/// What the quiet set adds in 2D (the multigrid PPE since preset revision 3).
+const QUIET_2D_ONLY: [&str; 4] = [
     "mps.pressure_regularisation=1",
     "mps.compressibility_1_pa=1e-7",
+    "mps.ppe_preconditioner=multigrid",
+    "mps.multigrid_over_correction=1.5",
 ];
 /// What it adds for a fluid with a yield stress: the rigid state by the augmented Lagrangian
 /// (the walls' own faces since preset revision 2).
@@ -1330,7 +1332,7 @@ const QUIET_YIELD: [&str; 7] = [
 fn the_quiet_yield_set_takes_the_walls_faces_from_revision_2() {
     use mps_runner::experiment::SceneSpec;
     use mps_runner::manifest::{PRESET_REVISION, PresetName};
-    assert_eq!(PRESET_REVISION, 2);
+    assert!(PRESET_REVISION >= 2);
     let path = common::experiment("inclined_layer.yaml");
     let text = std::fs::read_to_string(&path).unwrap();
     let at = |sets: &[&str], revision: u32| {
@@ -1346,6 +1348,58 @@ fn the_quiet_yield_set_takes_the_walls_faces_from_revision_2() {
     assert!(r.manifest.mps.wall_face_normals);
     let water = load_exp("tank_at_rest.yaml", &["mps.preset=quiet"]).manifest;
     assert!(!water.mps.wall_face_normals);
+}
+
+/// Preset revision 3 gives the 2D quiet set the multigrid PPE with the over-correction 1.5;
+/// revision 2 left the solver at Jacobi, and 3D keeps Jacobi (faster there). A file's own
+/// solver fields beat the preset written or defaulted; `standard` leaves them alone.
+#[test]
+fn the_2d_quiet_set_takes_the_multigrid_pressure_solve_from_revision_3() {
+    use mps_runner::experiment::SceneSpec;
+    use mps_runner::manifest::{PRESET_REVISION, PpePreconditioner, PresetName};
+    assert_eq!(PRESET_REVISION, 3);
+    let at = |file: &str, sets: &[&str], revision: u32| {
+        let text = std::fs::read_to_string(common::experiment(file)).unwrap();
+        let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
+        manifest::from_str_as_of::<SceneSpec>(&text, "x", &sets, Some(PresetName::Quiet), revision)
+            .unwrap()
+            .manifest
+            .mps
+    };
+    let heap = at("column_collapse_2d.yaml", &[], 3);
+    assert_eq!(heap.ppe_preconditioner, PpePreconditioner::Multigrid);
+    assert_eq!(heap.multigrid_over_correction, 1.5);
+    let before = at("column_collapse_2d.yaml", &[], 2);
+    assert_eq!(before.ppe_preconditioner, PpePreconditioner::Jacobi);
+    assert_eq!(before.multigrid_over_correction, 1.0);
+    let slump = at("slump_3d.yaml", &["mps.preset=quiet"], 3);
+    assert_eq!(slump.ppe_preconditioner, PpePreconditioner::Jacobi);
+    // The inclined layer writes plain aggregation: it keeps it under the default.
+    let layer = at("inclined_layer.yaml", &[], 3);
+    assert_eq!(layer.ppe_preconditioner, PpePreconditioner::Multigrid);
+    assert_eq!(layer.multigrid_over_correction, 1.0);
+    // `standard` sets the scheme back, not the solver: the dam break keeps its multigrid,
+    // the heap its default Jacobi.
+    let dam = load_exp("dam_break_2d.yaml", &["mps.preset=standard"])
+        .manifest
+        .mps;
+    assert_eq!(dam.ppe_preconditioner, PpePreconditioner::Multigrid);
+    assert_eq!(dam.multigrid_over_correction, 1.5);
+    let standard = load_exp("column_collapse_2d.yaml", &["mps.preset=standard"])
+        .manifest
+        .mps;
+    assert_eq!(standard.ppe_preconditioner, PpePreconditioner::Jacobi);
+    // Jacobi set on a revision-3 run gives revision 2's experiment (same hash): the field
+    // changed nothing else.
+    let text = std::fs::read_to_string(common::experiment("column_collapse_2d.yaml")).unwrap();
+    let hash = |sets: &[&str], revision: u32| {
+        let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
+        manifest::from_str_as_of::<SceneSpec>(&text, "x", &sets, Some(PresetName::Quiet), revision)
+            .unwrap()
+            .hash_hex
+    };
+    assert_eq!(hash(&["mps.ppe_preconditioner=jacobi"], 3), hash(&[], 2));
+    assert_ne!(hash(&[], 3), hash(&[], 2));
 }
 
 fn load_exp(file: &str, sets: &[&str]) -> Resolved {
