@@ -16,7 +16,7 @@
 //! `mps.yield_anderson_depth` at 0, `mps.corrected_strain_rate`, `mps.wall_surface_no_slip`, `mps.wall_face_normals`, `mps.quadratic_strain_rate`
 //! and `mps.exact_projection` (also under the standard scheme) false, `stop.rest_*` without
 //! `stop.rest_metric`, null `mps.wall_collision_*`, `mps.strain_rate_radius`,
-//! `mps.viscous_laplacian_radius`, `time.dt_min_s`, `stop.max_ghost_particles` and the rod's,
+//! `mps.viscous_laplacian_radius`, `time.dt_min_s`, `time.acoustic_courant`, `stop.max_ghost_particles` and the rod's,
 //! the cone's and the bodies' slip lengths, an empty `boundaries` section), so every
 //! experiment keeps the hash it had before they existed and files written then still verify. JSON is YAML, so the canonical text loads back through
 //! [`super::from_str`] to the same manifest and hash.
@@ -152,6 +152,7 @@ pub fn canonical_text<S: SceneSection>(manifest: &Manifest<S>) -> String {
         ("mps", "viscous_laplacian_radius"),
         ("mps", "solid_wall_layers"),
         ("time", "dt_min_s"),
+        ("time", "acoustic_courant"),
         ("stop", "max_ghost_particles"),
         ("scene", "rod_slip_length_m"),
         ("scene", "cone_slip_length_m"),

@@ -59,8 +59,24 @@ impl<S: SceneSection> Manifest<S> {
     /// CFL rule gives below the speed guard, so the default never fires before the guard.
     pub fn dt_min_s(&self) -> f64 {
         self.time.dt_min_s.unwrap_or_else(|| {
-            (self.time.courant * self.spacing_m / self.stop.max_speed_m_s).min(self.time.dt_max_s)
+            (self.time.courant * self.spacing_m / self.stop.max_speed_m_s)
+                .min(self.largest_step_s())
         })
+    }
+
+    /// The largest step: `time.dt_max_s`, and with `time.acoustic_courant` A at most
+    /// A spacing_m sqrt(rho kappa) (A spacings per artificial sound speed). The increment's
+    /// compressibility term rho kappa / dt^2 stands to the Laplacian's 1 / l0^2 as
+    /// (l0 / (c dt))^2: under a fixed `dt_max_s` that share falls as l0^2, and with it the
+    /// damping it gives (docs/performance.md, "The 2D default's solver").
+    pub fn largest_step_s(&self) -> f64 {
+        match self.time.acoustic_courant {
+            Some(a) => self.time.dt_max_s.min(
+                a * self.spacing_m
+                    * (self.fluid.density_kg_m3() * self.mps.compressibility_1_pa).sqrt(),
+            ),
+            None => self.time.dt_max_s,
+        }
     }
 }
 
@@ -101,6 +117,11 @@ pub struct Time {
     /// last step to `end_s` excepted). null = see [`Manifest::dt_min_s`].
     #[serde(default)]
     pub dt_min_s: Option<f64>,
+    /// Largest step as an acoustic Courant number A: dt <= A spacing_m / c, with c = 1 /
+    /// sqrt(rho kappa) the artificial sound speed of `mps.compressibility_1_pa`. null = no
+    /// such bound (the rule before the field).
+    #[serde(default)]
+    pub acoustic_courant: Option<f64>,
 }
 
 fn default_dt_max_s() -> f64 {
@@ -720,6 +741,7 @@ pub(crate) fn samples<S: SceneSection>() -> Vec<Manifest<S>> {
                 dt_max_s: default_dt_max_s(),
                 courant: default_courant(),
                 dt_min_s: None,
+                acoustic_courant: None,
             },
             fluid: fluids[i.min(fluids.len() - 1)].clone(),
             mps: Mps::default(),

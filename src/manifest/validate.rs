@@ -66,6 +66,16 @@ pub fn check<S: SceneSection>(m: &Manifest<S>) -> Vec<Issue> {
         );
     }
 
+    if let Some(a) = m.time.acoustic_courant
+        && c.real("time.acoustic_courant", a, POSITIVE)
+        && m.mps.compressibility_1_pa <= 0.0
+    {
+        c.fail(
+            "time.acoustic_courant",
+            "needs mps.compressibility_1_pa > 0 (the sound speed it counts in)".to_string(),
+        );
+    }
+
     // fluid
     match &m.fluid {
         Fluid::Newtonian {

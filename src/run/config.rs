@@ -125,7 +125,7 @@ pub fn solver_config<const D: usize>(m: &Manifest, scene: &Scene<D>) -> SolverCo
         ppe_tolerance: m.mps.ppe_tolerance,
         ppe_max_iterations: m.mps.ppe_max_iterations,
         courant: m.time.courant,
-        dt_max_s: m.time.dt_max_s,
+        dt_max_s: m.largest_step_s(),
         max_speed_m_s: m.stop.max_speed_m_s,
         domain_min_m: scene.domain_min_m,
         domain_max_m: scene.domain_max_m,

@@ -1332,7 +1332,7 @@ const QUIET_YIELD: [&str; 7] = [
 fn the_quiet_yield_set_takes_the_walls_faces_from_revision_2() {
     use mps_runner::experiment::SceneSpec;
     use mps_runner::manifest::{PRESET_REVISION, PresetName};
-    assert!(PRESET_REVISION >= 2);
+    const { assert!(PRESET_REVISION >= 2) };
     let path = common::experiment("inclined_layer.yaml");
     let text = std::fs::read_to_string(&path).unwrap();
     let at = |sets: &[&str], revision: u32| {
@@ -1400,6 +1400,30 @@ fn the_2d_quiet_set_takes_the_multigrid_pressure_solve_from_revision_3() {
     };
     assert_eq!(hash(&["mps.ppe_preconditioner=jacobi"], 3), hash(&[], 2));
     assert_ne!(hash(&[], 3), hash(&[], 2));
+}
+
+/// `time.acoustic_courant` is left out of the canonical form while null (the rule before
+/// it), bounds the largest step by A l0 sqrt(rho kappa), and needs a compressibility.
+#[test]
+fn the_acoustic_step_bound_is_a_field_of_its_own() {
+    let plain = load_exp("smoke_2d.yaml", &[]);
+    assert!(!plain.canonical.contains("acoustic_courant"));
+    assert_eq!(plain.manifest.largest_step_s(), 1e-3);
+    let bounded = load_exp("smoke_2d.yaml", &["time.acoustic_courant=40"]);
+    assert_ne!(plain.hash_hex, bounded.hash_hex);
+    // 40 * 0.025 m * sqrt(1000 kg/m3 * 1e-7 1/Pa) = 0.01 s: dt_max (1 ms) is the smaller.
+    assert_eq!(bounded.manifest.largest_step_s(), 1e-3);
+    let fine = load_exp(
+        "smoke_2d.yaml",
+        &["time.acoustic_courant=40", "spacing_m=0.0005"],
+    );
+    assert!((fine.manifest.largest_step_s() - 2e-4).abs() < 1e-15);
+    let sets = vec![
+        "time.acoustic_courant=40".to_string(),
+        "mps.compressibility_1_pa=0".to_string(),
+    ];
+    let e = experiment::load(&common::experiment("smoke_2d.yaml"), &sets).unwrap_err();
+    assert!(e.to_string().contains("time.acoustic_courant"), "{e}");
 }
 
 fn load_exp(file: &str, sets: &[&str]) -> Resolved {

@@ -1047,3 +1047,42 @@ fn pressure_smoothing_takes_out_a_checkerboard_the_flow_cannot_see() {
         "still tank bottom pressure error {error:.4}"
     );
 }
+
+/// Largest fluid speed over the steps of `smoke_2d.yaml` at 0.5 mm under the 2D default to
+/// `end_s`, and the largest step taken.
+fn fine_smoke_start(sets: &[&str], end_s: f64) -> (Vec<(f64, f64)>, f64) {
+    let all = [&["spacing_m=0.0005"][..], sets].concat();
+    let resolved = crate::common::resolve("smoke_2d.yaml", &all);
+    let mut solver: Solver<2> = crate::common::solver_of(&resolved.manifest);
+    let (mut speeds, mut largest) = (Vec::new(), 0.0f64);
+    while solver.time_s < end_s {
+        let dt = solver.next_dt_s(end_s);
+        largest = largest.max(dt);
+        solver.step(dt).expect("step");
+        speeds.push((solver.time_s, solver.max_fluid_speed_m_s()));
+    }
+    (speeds, largest)
+}
+
+/// `time.acoustic_courant`: at 0.5 mm the 2D default's first steps of 1 ms leave the
+/// compressibility's damping a share (l0 / (c dt))^2 = 2.5e-5 of the Laplacian, and the
+/// column's toe jumps to 2 m/s at its fifth step (measured, docs/performance.md, "The 2D
+/// default's solver"); bounded to 40 spacings per sound speed (0.2 ms here) its fastest
+/// particle grows at about 4 g (0.30 m/s at 7.8 ms). A particle pushed by the column's head
+/// (rho g H over a few spacings) may not outrun 10 g t.
+#[test]
+fn an_acoustic_step_bound_keeps_a_fine_2d_start_smooth() {
+    let g = 9.81;
+    let bound = |t: f64| 10.0 * g * t;
+    let (speeds, largest) = fine_smoke_start(&["time.acoustic_courant=40"], 0.004);
+    assert!((largest - 2e-4).abs() < 1e-12, "largest step {largest}");
+    for &(t, v) in &speeds {
+        assert!(v < bound(t), "bounded: {v} m/s at {t} s");
+    }
+    let (speeds, largest) = fine_smoke_start(&[], 0.0045);
+    assert_eq!(largest, 1e-3);
+    assert!(
+        speeds.iter().any(|&(t, v)| v > bound(t)),
+        "without the bound the start jumps (2.1 m/s at the fifth step when measured): {speeds:?}"
+    );
+}
