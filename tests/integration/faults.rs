@@ -81,12 +81,17 @@ fn a_pressure_solve_jacobi_cannot_finish_names_multigrid_which_the_2d_default_us
         "mps.ppe_max_iterations=30",
     ];
     let dir = tempfile::tempdir().unwrap();
-    let mut cmd = common::runner();
-    cmd.arg(&exp).arg("--out").arg(dir.path()).arg("--quiet");
+    let mut args = vec![
+        exp.to_str().unwrap(),
+        "--out",
+        dir.path().to_str().unwrap(),
+        "--quiet",
+    ];
     for s in sets {
-        cmd.args(["--set", s]);
+        args.extend(["--set", s]);
     }
-    cmd.assert().code(0);
+    let (code, text) = common::runner_output(&args);
+    assert_eq!(code, Some(0), "{text}");
     let reason = assert_fails(
         &exp,
         &[&sets[..], &["mps.ppe_preconditioner=jacobi"]].concat(),

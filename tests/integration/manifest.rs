@@ -1331,19 +1331,13 @@ const QUIET_YIELD: [&str; 7] = [
 #[test]
 fn the_quiet_yield_set_takes_the_walls_faces_from_revision_2() {
     use mps_runner::experiment::SceneSpec;
-    use mps_runner::manifest::{PRESET_REVISION, PresetName};
+    use mps_runner::manifest::PRESET_REVISION;
     const { assert!(PRESET_REVISION >= 2) };
-    let path = common::experiment("inclined_layer.yaml");
-    let text = std::fs::read_to_string(&path).unwrap();
-    let at = |sets: &[&str], revision: u32| {
-        let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
-        manifest::from_str_as_of::<SceneSpec>(&text, "x", &sets, Some(PresetName::Quiet), revision)
-            .unwrap()
-            .manifest
-            .mps
-    };
+    let at =
+        |sets: &[&str], revision: u32| as_of("inclined_layer.yaml", sets, revision).manifest.mps;
     assert!(at(&[], 2).wall_face_normals);
     assert!(!at(&[], 1).wall_face_normals);
+    let text = std::fs::read_to_string(common::experiment("inclined_layer.yaml")).unwrap();
     let r = manifest::from_str::<SceneSpec>(&text, "x", &[]).unwrap();
     assert!(r.manifest.mps.wall_face_normals);
     let water = load_exp("tank_at_rest.yaml", &["mps.preset=quiet"]).manifest;
@@ -1355,17 +1349,9 @@ fn the_quiet_yield_set_takes_the_walls_faces_from_revision_2() {
 /// solver fields beat the preset written or defaulted; `standard` leaves them alone.
 #[test]
 fn the_2d_quiet_set_takes_the_multigrid_pressure_solve_from_revision_3() {
-    use mps_runner::experiment::SceneSpec;
-    use mps_runner::manifest::{PRESET_REVISION, PpePreconditioner, PresetName};
+    use mps_runner::manifest::{PRESET_REVISION, PpePreconditioner};
     assert_eq!(PRESET_REVISION, 3);
-    let at = |file: &str, sets: &[&str], revision: u32| {
-        let text = std::fs::read_to_string(common::experiment(file)).unwrap();
-        let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
-        manifest::from_str_as_of::<SceneSpec>(&text, "x", &sets, Some(PresetName::Quiet), revision)
-            .unwrap()
-            .manifest
-            .mps
-    };
+    let at = |file: &str, sets: &[&str], revision: u32| as_of(file, sets, revision).manifest.mps;
     let heap = at("column_collapse_2d.yaml", &[], 3);
     assert_eq!(heap.ppe_preconditioner, PpePreconditioner::Multigrid);
     assert_eq!(heap.multigrid_over_correction, 1.5);
@@ -1391,13 +1377,8 @@ fn the_2d_quiet_set_takes_the_multigrid_pressure_solve_from_revision_3() {
     assert_eq!(standard.ppe_preconditioner, PpePreconditioner::Jacobi);
     // Jacobi set on a revision-3 run gives revision 2's experiment (same hash): the field
     // changed nothing else.
-    let text = std::fs::read_to_string(common::experiment("column_collapse_2d.yaml")).unwrap();
-    let hash = |sets: &[&str], revision: u32| {
-        let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
-        manifest::from_str_as_of::<SceneSpec>(&text, "x", &sets, Some(PresetName::Quiet), revision)
-            .unwrap()
-            .hash_hex
-    };
+    let hash =
+        |sets: &[&str], revision: u32| as_of("column_collapse_2d.yaml", sets, revision).hash_hex;
     assert_eq!(hash(&["mps.ppe_preconditioner=jacobi"], 3), hash(&[], 2));
     assert_ne!(hash(&[], 3), hash(&[], 2));
 }
@@ -1424,6 +1405,16 @@ fn the_acoustic_step_bound_is_a_field_of_its_own() {
     ];
     let e = experiment::load(&common::experiment("smoke_2d.yaml"), &sets).unwrap_err();
     assert!(e.to_string().contains("time.acoustic_courant"), "{e}");
+}
+
+/// A shipped experiment with `sets`, resolved under the default `quiet` as preset
+/// `revision` resolved it.
+fn as_of(file: &str, sets: &[&str], revision: u32) -> Resolved {
+    use mps_runner::manifest::PresetName;
+    let text = std::fs::read_to_string(common::experiment(file)).unwrap();
+    let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
+    manifest::from_str_as_of::<SceneSpec>(&text, "x", &sets, Some(PresetName::Quiet), revision)
+        .unwrap()
 }
 
 fn load_exp(file: &str, sets: &[&str]) -> Resolved {
