@@ -72,7 +72,9 @@ pub fn check<S: SceneSection>(m: &Manifest<S>) -> Vec<Issue> {
     {
         c.fail(
             "time.acoustic_courant",
-            "needs mps.compressibility_1_pa > 0 (the sound speed it counts in)".to_string(),
+            "needs mps.compressibility_1_pa > 0 (the sound speed it counts in); without one, set \
+             time.acoustic_courant: null"
+                .to_string(),
         );
     }
 

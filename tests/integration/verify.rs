@@ -556,8 +556,8 @@ fn assert_source_resolves_to((code, text): (i32, String), sets: &[String], hash:
 /// own faces for a yield-stress fluid) leaves files written before verifying. A 2D Bingham run
 /// under the default `quiet`, resolved as revision 1 resolved it: its file records 1 and
 /// verifies; without the record (a file from before revisions) it reads as 1 and verifies; told
-/// 2 its source resolves to today's experiment, another one, and verify says so; a revision this
-/// build does not know is refused. `info` names the preset by the file's revision.
+/// 2 its source resolves to revision 2's experiment, another one, and verify says so; a
+/// revision this build does not know is refused. `info` names the preset by the file's revision.
 #[test]
 fn a_file_records_its_preset_revision_and_verifies_under_it() {
     use mps_runner::experiment::SceneSpec;
@@ -580,6 +580,15 @@ fn a_file_records_its_preset_revision_and_verifies_under_it() {
     assert_eq!(today.preset_revision, PRESET_REVISION);
     assert!(today.manifest.mps.wall_face_normals);
     assert_ne!(first.hash_hex, today.hash_hex);
+    let second = manifest::from_str_as_of::<SceneSpec>(
+        &text,
+        "inclined_layer.yaml",
+        &sets,
+        Some(PresetName::Quiet),
+        2,
+    )
+    .unwrap();
+    assert!(second.manifest.mps.wall_face_normals);
     let out = tempfile::tempdir().unwrap();
     let file = common::run_completed(&first, out.path(), 1).path;
     let run = read_run(&file).unwrap();
@@ -610,7 +619,7 @@ fn a_file_records_its_preset_revision_and_verifies_under_it() {
     };
     let (code, text) = rewritten("unrecorded.mcap", None);
     assert_eq!(code, 0, "{text}");
-    assert_source_resolves_to(rewritten("told_2.mcap", Some(2)), &sets, &today.hash_hex);
+    assert_source_resolves_to(rewritten("told_2.mcap", Some(2)), &sets, &second.hash_hex);
     let (code, text) = rewritten("told_99.mcap", Some(99));
     assert_eq!(code, 1, "{text}");
     assert!(text.contains("unknown preset_revision \"99\""), "{text}");
