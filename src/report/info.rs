@@ -242,6 +242,10 @@ pub fn run_info(path: &Path, size_bytes: u64, run: &RunFile) -> RunInfo {
             {
                 text.push_str(&format!(", mps.compressibility_1_pa {v:e}"));
             }
+            // In the canonical form only when set; the 2D default's bound since revision 4.
+            if let Some(v) = m.get("time").and_then(|t| t.get("acoustic_courant")) {
+                text.push_str(&format!(", time.acoustic_courant {v}"));
+            }
             if is_quiet_preset(run) {
                 text.push_str(" (= mps.preset quiet)");
             }

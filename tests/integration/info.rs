@@ -64,8 +64,8 @@ fn info_of_a_finished_run_as_text_and_json() {
         line("scheme"),
         "scheme       mps.pressure_scheme incremental, mps.pair_stabilisation 0.8, \
          mps.wall_support 0.95, mps.pressure_regularisation 1.0, mps.regularisation_radius 1.5, \
-         mps.surface_depth 0.5, mps.corrected_strain_rate true, mps.compressibility_1_pa 1e-7 \
-         (= mps.preset quiet)"
+         mps.surface_depth 0.5, mps.corrected_strain_rate true, mps.compressibility_1_pa 1e-7, \
+         time.acoustic_courant 40.0 (= mps.preset quiet)"
     );
     assert!(line("build").contains("release profile"), "{text}");
     assert_eq!(line("threads"), "threads      1");
