@@ -567,27 +567,23 @@ fn a_file_records_its_preset_revision_and_verifies_under_it() {
     let sets: Vec<String> = ["spacing_m=0.01", "scene.period_m=0.12", "time.end_s=0.003"]
         .map(String::from)
         .to_vec();
-    let first = manifest::from_str_as_of::<SceneSpec>(
-        &text,
-        "inclined_layer.yaml",
-        &sets,
-        Some(PresetName::Quiet),
-        1,
-    )
-    .unwrap();
+    let as_of = |revision: u32| {
+        manifest::from_str_as_of::<SceneSpec>(
+            &text,
+            "inclined_layer.yaml",
+            &sets,
+            Some(PresetName::Quiet),
+            revision,
+        )
+        .unwrap()
+    };
+    let first = as_of(1);
     assert!(!first.manifest.mps.wall_face_normals);
     let today = manifest::from_str::<SceneSpec>(&text, "inclined_layer.yaml", &sets).unwrap();
     assert_eq!(today.preset_revision, PRESET_REVISION);
     assert!(today.manifest.mps.wall_face_normals);
     assert_ne!(first.hash_hex, today.hash_hex);
-    let second = manifest::from_str_as_of::<SceneSpec>(
-        &text,
-        "inclined_layer.yaml",
-        &sets,
-        Some(PresetName::Quiet),
-        2,
-    )
-    .unwrap();
+    let second = as_of(2);
     assert!(second.manifest.mps.wall_face_normals);
     let out = tempfile::tempdir().unwrap();
     let file = common::run_completed(&first, out.path(), 1).path;
