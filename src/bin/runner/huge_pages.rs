@@ -7,8 +7,8 @@
 //! glibc's mmap threshold, so each step maps them afresh and faults them in 4 KiB at a time
 //! (the 1 M-particle dam break: 9.9 M faults in 40 steps, 12 % of its CPU time in the
 //! kernel). Advised, they fault in 2 MiB at a time and the solves' scattered reads miss the
-//! TLB less (docs/performance.md, "Large blocks on huge pages"). Only where memory comes
-//! from changes, never a value: the same bits.
+//! TLB less (docs/performance.md, "What changed, and what did not help"). Only where memory
+//! comes from changes, never a value: the same bits.
 
 use std::alloc::{GlobalAlloc, Layout, System};
 

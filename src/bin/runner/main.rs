@@ -39,14 +39,14 @@ fn write_stdout(args: std::fmt::Arguments) {
 
 mod cli;
 mod commands;
-mod huge_pages;
-
-#[global_allocator]
-static ALLOCATOR: huge_pages::HugePageAlloc = huge_pages::HugePageAlloc;
 mod error;
+mod huge_pages;
 mod interrupt;
 mod progress;
 mod run_file;
+
+#[global_allocator]
+static ALLOCATOR: huge_pages::HugePageAlloc = huge_pages::HugePageAlloc;
 
 use clap::Parser;
 use cli::{Cli, Command};
