@@ -6,8 +6,8 @@
 //! cannot be used.
 //!
 //! The other modules: `progress` (bars and lines on stderr), `interrupt` (SIGINT and
-//! SIGTERM), `run_file` (how far a run file can be trusted before it is read), `huge_pages`
-//! (the global allocator: large blocks on transparent huge pages).
+//! SIGTERM), `run_file` (how far a run file can be trusted before it is read), `allocator`
+//! (where memory comes from: large blocks on transparent huge pages, glibc's parameters).
 
 /// `print!` and `println!` for this binary: standard output whose reader has gone (`runner
 /// RUN | head -1`) is no error of ours, so a closed pipe is ignored rather than a panic (std's
@@ -37,16 +37,16 @@ fn write_stdout(args: std::fmt::Arguments) {
     }
 }
 
+mod allocator;
 mod cli;
 mod commands;
 mod error;
-mod huge_pages;
 mod interrupt;
 mod progress;
 mod run_file;
 
 #[global_allocator]
-static ALLOCATOR: huge_pages::HugePageAlloc = huge_pages::HugePageAlloc;
+static ALLOCATOR: allocator::HugePageAlloc = allocator::HugePageAlloc;
 
 use clap::Parser;
 use cli::{Cli, Command};
@@ -68,22 +68,8 @@ fn main() -> ExitCode {
             libc::signal(libc::SIGPIPE, libc::SIG_DFL);
         }
     }
-    // The solver allocates and frees its per-step buffers every step; glibc's default then
-    // gives the heap top back to the system and faults the pages in again each step (the 5 mm
-    // dam break to 0.1 s: 23.8 k minor faults against 3.1 k, 10 % of its wall time;
-    // docs/performance.md). A 64 MiB top pad keeps them. Blocks above glibc's mmap threshold
-    // (grown at run time, not past 32 MiB) are mapped and unmapped every step; from 100 k
-    // particles on many per-step buffers are that large (the 0.8 mm dam break: 1.6 M faults
-    // in 40 steps, 10 % of its CPU time in the kernel). Fixed at its ceiling, with no trim
-    // below the top pad's reach, they are kept too. Only where memory comes from changes,
-    // not a bit of a run.
-    #[cfg(all(target_os = "linux", target_env = "gnu"))]
-    // SAFETY: sets allocator parameters before any worker thread exists.
-    unsafe {
-        libc::mallopt(libc::M_TOP_PAD, 64 << 20);
-        libc::mallopt(libc::M_MMAP_THRESHOLD, 32 << 20);
-        libc::mallopt(libc::M_TRIM_THRESHOLD, 1 << 30);
-    }
+    // Only where memory comes from changes, not a bit of a run.
+    allocator::tune_glibc();
     let ended = match cli.command {
         None => run::command(cli.run),
         Some(Command::Run(args)) => run::command(args),
