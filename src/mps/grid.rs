@@ -389,6 +389,136 @@ impl Neighbours {
         lists
     }
 
+    /// The lists that [`Neighbours::build_centres_then_listed`] (without mirror planes) gives
+    /// at `positions`, from `self`, these lists at positions that differ only at the
+    /// particles `moved` (ascending and active; every particle past `self`'s count among them;
+    /// no particle's `active`, `centre` or `then` changed). Only the moved particles are
+    /// searched in the cell grid; every other list is `self`'s, the moved entries taken out
+    /// and their new ones merged in, so the cost follows the moved particles, not all of them.
+    pub fn updated<const D: usize>(
+        &self,
+        positions: &[Vector<D>],
+        moved: &[u32],
+        active: impl Fn(usize) -> bool + Sync,
+        centre: impl Fn(usize) -> bool + Sync,
+        then: impl Fn(usize) -> bool + Sync,
+    ) -> Self {
+        assert!(
+            self.mirror.is_empty(),
+            "lists with mirror images are built whole"
+        );
+        let n = positions.len();
+        let listed_before = self.offsets.len() - 1;
+        debug_assert!(moved.windows(2).all(|w| w[0] < w[1]));
+        debug_assert!((listed_before..n).all(|i| moved.binary_search(&(i as u32)).is_ok()));
+        let mut is_moved = vec![false; n];
+        for &s in moved {
+            is_moved[s as usize] = true;
+        }
+        let grid = CellGrid::new(positions, self.cutoff_m, self.period_x_m);
+        // Every moved particle's neighbours (row k: particle moved[k]), holder or not: they
+        // are also where the moved particle enters the others' lists (the cut is symmetric).
+        let searched = |subset: &[u32]| {
+            let chunks: Vec<(Vec<usize>, Vec<u32>)> = subset
+                .par_chunks(LIST_CHUNK)
+                .map(|chunk| {
+                    let mut counts = Vec::with_capacity(chunk.len());
+                    let mut list = Vec::with_capacity(chunk.len() * 32);
+                    for &i in chunk {
+                        let before = list.len();
+                        grid.append_neighbours(positions, i as usize, &active, &mut list);
+                        counts.push(list.len() - before);
+                    }
+                    (counts, list)
+                })
+                .collect();
+            Self::from_chunks(self.cutoff_m, self.period_x_m, self.mirror, chunks)
+        };
+        let moved_lists = searched(moved);
+        // The moved entries each particle gains, ascending (moved is ascending).
+        let mut gained_offsets = vec![0usize; n + 1];
+        for &j in &moved_lists.indices {
+            gained_offsets[j as usize + 1] += 1;
+        }
+        for i in 0..n {
+            gained_offsets[i + 1] += gained_offsets[i];
+        }
+        let mut fill = gained_offsets.clone();
+        let mut gained = vec![0u32; moved_lists.indices.len()];
+        for (k, &s) in moved.iter().enumerate() {
+            for &j in moved_lists.of(k) {
+                gained[fill[j as usize]] = s;
+                fill[j as usize] += 1;
+            }
+        }
+        let gained_of = |i: usize| &gained[gained_offsets[i]..gained_offsets[i + 1]];
+        let is_centre = |j: u32| active(j as usize) && centre(j as usize);
+        // A `then` particle has a list when some centre lies within the cutoff: one that did
+        // not move and was in its list, or a moved one that now is.
+        let row_of_moved = |i: usize| moved.binary_search(&(i as u32)).ok();
+        let holds_list = |i: usize| {
+            if !active(i) {
+                return false;
+            }
+            if centre(i) {
+                return true;
+            }
+            if !then(i) {
+                return false;
+            }
+            match row_of_moved(i) {
+                Some(k) => moved_lists.of(k).iter().any(|&j| is_centre(j)),
+                None => {
+                    let kept = i < listed_before
+                        && self
+                            .of(i)
+                            .iter()
+                            .any(|&j| !is_moved[j as usize] && is_centre(j));
+                    kept || gained_of(i).iter().any(|&j| is_centre(j))
+                }
+            }
+        };
+        // Particles that did not move and hold a list now but held none: searched whole.
+        let new_holders: Vec<u32> = (0..n)
+            .into_par_iter()
+            .with_min_len(LIST_CHUNK)
+            .filter(|&i| {
+                !is_moved[i] && (i >= listed_before || self.of(i).is_empty()) && {
+                    // A centre always held its (possibly empty) list.
+                    !centre(i) && holds_list(i)
+                }
+            })
+            .map(|i| i as u32)
+            .collect();
+        let new_holder_lists = searched(&new_holders);
+        let chunks: Vec<(Vec<usize>, Vec<u32>)> = (0..n.div_ceil(LIST_CHUNK))
+            .into_par_iter()
+            .with_max_len(1)
+            .map(|chunk| {
+                let range = chunk * LIST_CHUNK..((chunk + 1) * LIST_CHUNK).min(n);
+                let mut counts = Vec::with_capacity(range.len());
+                let mut list = Vec::with_capacity(range.len() * 32);
+                for i in range {
+                    let before = list.len();
+                    if holds_list(i) {
+                        if let Some(k) = row_of_moved(i) {
+                            list.extend_from_slice(moved_lists.of(k));
+                        } else if let Ok(k) = new_holders.binary_search(&(i as u32)) {
+                            list.extend_from_slice(new_holder_lists.of(k));
+                        } else {
+                            // Both ascending: merge the kept entries with the gained ones.
+                            let kept = self.of(i).iter().filter(|&&j| !is_moved[j as usize]);
+                            merge_ascending(kept.copied(), gained_of(i), &mut list);
+                        }
+                    }
+                    counts.push(list.len() - before);
+                }
+                (counts, list)
+            })
+            .collect();
+        Self::from_chunks(self.cutoff_m, self.period_x_m, self.mirror, chunks)
+    }
+
     fn build_general<const D: usize>(
         positions: &[Vector<D>],
         cutoff_m: f64,
@@ -490,26 +620,6 @@ impl<const D: usize> CellGrid<D> {
         centre: &(impl Fn(usize) -> bool + Sync),
     ) -> Neighbours {
         let n = positions.len();
-        let (cutoff_m, period_x_m) = (self.cutoff_m, self.period_x_m);
-        if n == 0 {
-            return Neighbours {
-                cutoff_m,
-                period_x_m,
-                mirror: MirrorPlanes::default(),
-                offsets: vec![0],
-                indices: Vec::new(),
-            };
-        }
-        let cutoff2 = cutoff_m * cutoff_m;
-        let image = Neighbours {
-            cutoff_m,
-            period_x_m,
-            mirror: MirrorPlanes::default(),
-            offsets: Vec::new(),
-            indices: Vec::new(),
-        };
-        let wrap = period_x_m.is_some();
-        let (dims, start, sorted) = (&self.dims, &self.start, &self.sorted);
         let chunks: Vec<(Vec<usize>, Vec<u32>)> = (0..n.div_ceil(LIST_CHUNK))
             .into_par_iter()
             .with_max_len(1)
@@ -519,53 +629,89 @@ impl<const D: usize> CellGrid<D> {
                 let mut list = Vec::with_capacity(range.len() * 32);
                 for i in range {
                     let before = list.len();
-                    if !(active(i) && centre(i)) {
-                        counts.push(0);
-                        continue;
+                    if active(i) && centre(i) {
+                        self.append_neighbours(positions, i, active, &mut list);
                     }
-                    let pi = positions[i];
-                    let ci = self.cell_of(&pi);
-                    // Visit the 3^D surrounding cells in a fixed (flat) order.
-                    for k in 0..3usize.pow(D as u32) {
-                        let mut rest = k;
-                        let mut c = [0usize; D];
-                        let mut inside = true;
-                        for a in 0..D {
-                            let off = (rest % 3) as i64 - 1;
-                            rest /= 3;
-                            let mut v = ci[a] as i64 + off;
-                            if a == 0 && wrap {
-                                v = v.rem_euclid(dims[0] as i64);
-                            }
-                            if v < 0 || v >= dims[a] as i64 {
-                                inside = false;
-                                break;
-                            }
-                            c[a] = v as usize;
-                        }
-                        if !inside {
-                            continue;
-                        }
-                        let f = self.flat(&c);
-                        for &j in &sorted[start[f]..start[f + 1]] {
-                            if j as usize != i
-                                && active(j as usize)
-                                && image.displacement(positions, i, j).norm_squared() < cutoff2
-                            {
-                                list.push(j);
-                            }
-                        }
-                    }
-                    // Ascending index: the order (hence every sum's rounding) then does not
-                    // depend on where the cells were when the list was built.
-                    list[before..].sort_unstable();
                     counts.push(list.len() - before);
                 }
                 (counts, list)
             })
             .collect();
-        Neighbours::from_chunks(cutoff_m, period_x_m, MirrorPlanes::default(), chunks)
+        Neighbours::from_chunks(
+            self.cutoff_m,
+            self.period_x_m,
+            MirrorPlanes::default(),
+            chunks,
+        )
     }
+
+    /// Appends to `list` every active j != i closer than the cutoff to particle i, in
+    /// ascending index order: the order (hence every sum's rounding) then does not depend on
+    /// where the cells were when the list was built.
+    fn append_neighbours(
+        &self,
+        positions: &[Vector<D>],
+        i: usize,
+        active: &(impl Fn(usize) -> bool + Sync),
+        list: &mut Vec<u32>,
+    ) {
+        let before = list.len();
+        let cutoff2 = self.cutoff_m * self.cutoff_m;
+        let image = Neighbours {
+            cutoff_m: self.cutoff_m,
+            period_x_m: self.period_x_m,
+            mirror: MirrorPlanes::default(),
+            offsets: Vec::new(),
+            indices: Vec::new(),
+        };
+        let wrap = self.period_x_m.is_some();
+        let (dims, start, sorted) = (&self.dims, &self.start, &self.sorted);
+        let ci = self.cell_of(&positions[i]);
+        // Visit the 3^D surrounding cells in a fixed (flat) order.
+        for k in 0..3usize.pow(D as u32) {
+            let mut rest = k;
+            let mut c = [0usize; D];
+            let mut inside = true;
+            for a in 0..D {
+                let off = (rest % 3) as i64 - 1;
+                rest /= 3;
+                let mut v = ci[a] as i64 + off;
+                if a == 0 && wrap {
+                    v = v.rem_euclid(dims[0] as i64);
+                }
+                if v < 0 || v >= dims[a] as i64 {
+                    inside = false;
+                    break;
+                }
+                c[a] = v as usize;
+            }
+            if !inside {
+                continue;
+            }
+            let f = self.flat(&c);
+            for &j in &sorted[start[f]..start[f + 1]] {
+                if j as usize != i
+                    && active(j as usize)
+                    && image.displacement(positions, i, j).norm_squared() < cutoff2
+                {
+                    list.push(j);
+                }
+            }
+        }
+        list[before..].sort_unstable();
+    }
+}
+
+/// Appends the union of two ascending sequences of distinct indices, ascending.
+fn merge_ascending(a: impl Iterator<Item = u32>, b: &[u32], out: &mut Vec<u32>) {
+    let mut b = b.iter().copied().peekable();
+    for x in a {
+        while let Some(y) = b.next_if(|&y| y < x) {
+            out.push(y);
+        }
+        out.push(x);
+    }
+    out.extend(b);
 }
 
 /// Which pairs of a particle's list [`Neighbours::within_two_by`] keeps.
@@ -648,6 +794,89 @@ impl KernelPairs {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A small deterministic generator (SplitMix64) for the scattered particles below.
+    fn uniform(state: &mut u64) -> f64 {
+        *state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = *state;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        (z ^ (z >> 31)) as f64 / u64::MAX as f64
+    }
+
+    /// An update equals the whole build at the new positions, entry for entry, in 2D and 3D,
+    /// periodic or not: fluid moved (some far, into walls' reach and out of it), walls moved,
+    /// particles appended, a ghost that never gets a list.
+    fn check_update_equals_build<const D: usize>(period_x_m: Option<f64>, seed: u64) {
+        let mut state = seed;
+        // A few neighbours each, so that some walls have no fluid in reach.
+        let (n0, added) = (900usize, 40usize);
+        let cutoff_m = if D == 2 { 0.025 } else { 0.05 };
+        let side_m = 0.6;
+        // 0 fluid, 1 wall, 2 dummy, 3 ghost.
+        let mut kinds: Vec<u8> = (0..n0)
+            .map(|_| match (uniform(&mut state) * 10.0) as u8 {
+                0..=4 => 0,
+                5..=7 => 1,
+                8 => 2,
+                _ => 3,
+            })
+            .collect();
+        let point = |state: &mut u64| Vector::<D>::from_fn(|_, _| side_m * uniform(state));
+        let before: Vec<Vector<D>> = (0..n0).map(|_| point(&mut state)).collect();
+        kinds.extend(std::iter::repeat_n(0, added));
+        let mut after = before.clone();
+        after.extend((0..added).map(|_| point(&mut state)));
+        let mut moved: Vec<u32> = Vec::new();
+        for i in 0..n0 + added {
+            let far = uniform(&mut state) < 0.1;
+            if (i >= n0 || far) && kinds[i] != 3 {
+                if i < n0 {
+                    // Up to two cutoffs in any direction, kept inside the box.
+                    let step =
+                        Vector::<D>::from_fn(|_, _| (uniform(&mut state) - 0.5) * 4.0 * cutoff_m);
+                    after[i] = (after[i] + step).map(|x| x.clamp(0.0, side_m * 0.999));
+                }
+                moved.push(i as u32);
+            }
+        }
+        let k = &kinds;
+        let build = |x: &[Vector<D>]| {
+            Neighbours::build_centres_then_listed(
+                x,
+                cutoff_m,
+                period_x_m,
+                MirrorPlanes::default(),
+                |i| k[i] != 3,
+                |i| k[i] == 0,
+                |i| k[i] == 1,
+            )
+        };
+        // The lists before know only the first n0 particles.
+        let old = build(&before);
+        let updated = old.updated(&after, &moved, |i| k[i] != 3, |i| k[i] == 0, |i| k[i] == 1);
+        let whole = build(&after);
+        assert_eq!(updated.offsets, whole.offsets);
+        assert_eq!(updated.indices, whole.indices);
+        // The moves changed some lists (the check is not vacuous) and walls gained and lost lists.
+        assert_ne!(old.indices, whole.indices[..]);
+        let holders = |l: &Neighbours, n: usize| {
+            (0..n)
+                .filter(|&i| !l.of(i).is_empty() && k[i] == 1)
+                .collect::<Vec<_>>()
+        };
+        assert_ne!(holders(&old, n0), holders(&whole, n0));
+    }
+
+    #[test]
+    fn an_update_equals_the_whole_build() {
+        for seed in 1..4 {
+            check_update_equals_build::<2>(None, seed);
+            check_update_equals_build::<3>(None, seed);
+            check_update_equals_build::<2>(Some(0.6), seed);
+            check_update_equals_build::<3>(Some(0.6), seed);
+        }
+    }
 
     /// The squared cut keeps exactly the distances the square-root cut keeps, at the edge too.
     #[test]

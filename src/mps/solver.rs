@@ -194,9 +194,11 @@ pub fn wall_collision_distance_m(
 /// never part of the state or of any recording).
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct StageTimes {
-    /// Cell-grid (Verlet) list builds and their count.
+    /// Cell-grid (Verlet) list builds and their count, and the partial updates
+    /// (`Neighbours::updated`).
     pub neighbours_s: f64,
     pub list_builds: u64,
+    pub list_updates: u64,
     /// Filtering the lists to the kernel radii (twice per step).
     pub kernel_pairs_s: f64,
     /// CG iterations summed over steps (viscosity: over the velocity components).

@@ -4,8 +4,19 @@
 use super::{LIST_SKIN, Solver};
 use crate::mps::grid::{KernelPairs, MirrorPlanes, Neighbours};
 use crate::mps::particles::ParticleKind;
+use crate::mps::particles::Vector;
+use crate::mps::reduce::PARTICLES_PER_TASK;
 use crate::mps::reduce::max_by;
+use rayon::prelude::*;
 use std::time::Instant;
+
+/// A particle whose reference is renewed moved at least this share of the skin: renewing
+/// more than the half skin that forces it puts off the next update (only speed depends on it).
+const REFERENCE_REFRESH: f64 = 0.25;
+
+/// The lists are built whole when more than one particle in this many moved (a partial
+/// update then costs about as much as a build; only speed depends on it).
+const MOVED_SHARE_FOR_WHOLE_BUILD: usize = 4;
 
 impl<const D: usize> Solver<D> {
     /// Neighbour lists of the active particles at the current positions.
@@ -80,34 +91,73 @@ impl<const D: usize> Solver<D> {
         }
     }
 
+    /// Keeps every active pair closer than the Laplacian radius in the lists (Verlet lists with
+    /// a skin, each particle listed at its own reference position `listed_at_m`). When some
+    /// particle has moved half the skin from its reference, or particles were poured, the
+    /// particles that moved a share of the skin (and the poured ones) get new references and
+    /// only their entries change ([`Neighbours::updated`]); the lists are built whole when
+    /// many moved, at the start, after a particle left the domain, with mirror planes, and
+    /// under wall faces.
+    /// Lists are ascending, and every stage cuts them to its radius at the current positions,
+    /// so either way gives the same pairs in the same order: the same bits.
     pub(super) fn refresh_lists(&mut self) {
         let skin = LIST_SKIN * self.config.spacing_m;
         let p = &self.particles;
-        let valid = self.listed_at_m.len() == p.len()
-            && max_by(p.len(), |i| {
-                if p.kind[i].is_active() {
-                    (p.position_m[i] - self.listed_at_m[i]).norm()
-                } else {
-                    0.0
-                }
-            }) < 0.5 * skin;
+        let (n, listed) = (p.len(), self.listed_at_m.len());
+        let moved_by = |i: usize| {
+            if i < listed && p.kind[i].is_active() {
+                (p.position_m[i] - self.listed_at_m[i]).norm()
+            } else {
+                0.0
+            }
+        };
+        let valid = listed == n && max_by(n, moved_by) < 0.5 * skin;
         if valid && !self.fresh_lists {
             return;
         }
         let kind = &p.kind;
+        let active = |i: usize| kind[i].is_active();
+        let centre = |i: usize| kind[i] == ParticleKind::Fluid;
+        let then = |i: usize| kind[i] == ParticleKind::Wall;
+        // The wall faces read which walls have fluid in their lists (`WallFaces::build`), which
+        // depends on when the lists were made: with them the lists are built whole, as always.
+        let faces_read_lists = self.config.wall_surface_no_slip && self.config.wall_face_normals;
+        if listed > 0
+            && listed <= n
+            && !self.fresh_lists
+            && !faces_read_lists
+            && self.config.symmetry.is_empty()
+        {
+            let moved: Vec<u32> = (0..n)
+                .into_par_iter()
+                .with_min_len(PARTICLES_PER_TASK)
+                .filter(|&i| i >= listed || moved_by(i) >= REFERENCE_REFRESH * skin)
+                .map(|i| i as u32)
+                .collect();
+            if moved.len() <= n / MOVED_SHARE_FOR_WHOLE_BUILD {
+                self.listed_at_m.resize(n, Vector::<D>::zeros());
+                for &i in &moved {
+                    self.listed_at_m[i as usize] = p.position_m[i as usize];
+                }
+                self.neighbours =
+                    self.neighbours
+                        .updated(&self.listed_at_m, &moved, active, centre, then);
+                self.timing.list_updates += 1;
+                return;
+            }
+        }
         // Operators are evaluated at fluid particles and at wall particles with fluid within
         // reach (see `refresh_pairs`): only they get lists. Dummy layers and walls away from
         // the fluid only fill the support of others.
         let cutoff_m = self.config.radius_lap_m + skin;
-        let active = |i: usize| kind[i].is_active();
         self.neighbours = Neighbours::build_centres_then_listed(
             &p.position_m,
             cutoff_m,
             self.config.periodic_x.map(|x| x.period_m),
             self.config.symmetry,
             active,
-            |i| kind[i] == ParticleKind::Fluid,
-            |i| kind[i] == ParticleKind::Wall,
+            centre,
+            then,
         );
         self.listed_at_m = p.position_m.clone();
         self.timing.list_builds += 1;

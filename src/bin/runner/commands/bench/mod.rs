@@ -92,7 +92,10 @@ fn print_stages(result: &RunResult, steps: f64, wall: f64) {
     let per_step = |total: u64| total as f64 / steps.max(1.0);
     let rows = [
         (
-            format!("neighbour lists ({} cell-grid builds)", t.list_builds),
+            format!(
+                "neighbour lists ({} cell-grid builds, {} updates)",
+                t.list_builds, t.list_updates
+            ),
             t.neighbours_s,
         ),
         (

@@ -149,7 +149,7 @@ pub struct BenchReport {
 /// NAME (2D, spacing 0.005 m): 6338 particles (5000 fluid), 401 steps to t = 0.2 s, 2 threads
 /// outcome completed; wall time 6.200 s; 408000 particle-steps/s
 /// stage                                            seconds   share
-/// neighbour lists (4 cell-grid builds)               0.001   10.3%
+/// neighbour lists (4 cell-grid builds, 0 updates)   0.001   10.3%
 /// ...
 /// ```
 /// `None` when the first two lines are not there (the child refused the run or crashed).
@@ -215,7 +215,7 @@ mod tests {
 smoke_2d (2D, spacing 0.025 m): 246 particles (72 fluid), 50 steps to t = 0.05 s, 2 threads
 outcome completed; wall time 0.009 s; 1359997 particle-steps/s
 stage                                            seconds   share
-neighbour lists (4 cell-grid builds)               0.001   10.3%
+neighbour lists (4 cell-grid builds, 0 updates)   0.001   10.3%
 viscosity (strain, assembly, CG 2.9 it/step)       0.001   11.3%
 PPE solve (CG 22.8 it/step)                        0.001   12.0%
 recording and output                               0.002   27.6%
