@@ -289,6 +289,33 @@ impl Neighbours {
         }
     }
 
+    /// Lists of `rows` rows, row k's entries appended by `row(k, list)`, in parallel over
+    /// fixed chunks of rows (so the split never depends on the thread count).
+    fn by_rows(
+        rows: usize,
+        cutoff_m: f64,
+        period_x_m: Option<f64>,
+        mirror: MirrorPlanes,
+        row: impl Fn(usize, &mut Vec<u32>) + Sync,
+    ) -> Self {
+        let chunks: Vec<(Vec<usize>, Vec<u32>)> = (0..rows.div_ceil(LIST_CHUNK))
+            .into_par_iter()
+            .with_max_len(1)
+            .map(|chunk| {
+                let range = chunk * LIST_CHUNK..((chunk + 1) * LIST_CHUNK).min(rows);
+                let mut counts = Vec::with_capacity(range.len());
+                let mut list = Vec::with_capacity(range.len() * 32);
+                for k in range {
+                    let before = list.len();
+                    row(k, &mut list);
+                    counts.push(list.len() - before);
+                }
+                (counts, list)
+            })
+            .collect();
+        Self::from_chunks(cutoff_m, period_x_m, mirror, chunks)
+    }
+
     fn from_chunks(
         cutoff_m: f64,
         period_x_m: Option<f64>,
@@ -419,20 +446,13 @@ impl Neighbours {
         // Every moved particle's neighbours (row k: particle moved[k]), holder or not: they
         // are also where the moved particle enters the others' lists (the cut is symmetric).
         let searched = |subset: &[u32]| {
-            let chunks: Vec<(Vec<usize>, Vec<u32>)> = subset
-                .par_chunks(LIST_CHUNK)
-                .map(|chunk| {
-                    let mut counts = Vec::with_capacity(chunk.len());
-                    let mut list = Vec::with_capacity(chunk.len() * 32);
-                    for &i in chunk {
-                        let before = list.len();
-                        grid.append_neighbours(positions, i as usize, &active, &mut list);
-                        counts.push(list.len() - before);
-                    }
-                    (counts, list)
-                })
-                .collect();
-            Self::from_chunks(self.cutoff_m, self.period_x_m, self.mirror, chunks)
+            Self::by_rows(
+                subset.len(),
+                self.cutoff_m,
+                self.period_x_m,
+                self.mirror,
+                |k, list| grid.append_neighbours(positions, subset[k] as usize, &active, list),
+            )
         };
         let moved_lists = searched(moved);
         // The moved entries each particle gains, ascending (moved is ascending).
@@ -491,32 +511,20 @@ impl Neighbours {
             .map(|i| i as u32)
             .collect();
         let new_holder_lists = searched(&new_holders);
-        let chunks: Vec<(Vec<usize>, Vec<u32>)> = (0..n.div_ceil(LIST_CHUNK))
-            .into_par_iter()
-            .with_max_len(1)
-            .map(|chunk| {
-                let range = chunk * LIST_CHUNK..((chunk + 1) * LIST_CHUNK).min(n);
-                let mut counts = Vec::with_capacity(range.len());
-                let mut list = Vec::with_capacity(range.len() * 32);
-                for i in range {
-                    let before = list.len();
-                    if holds_list(i) {
-                        if let Some(k) = row_of_moved(i) {
-                            list.extend_from_slice(moved_lists.of(k));
-                        } else if let Ok(k) = new_holders.binary_search(&(i as u32)) {
-                            list.extend_from_slice(new_holder_lists.of(k));
-                        } else {
-                            // Both ascending: merge the kept entries with the gained ones.
-                            let kept = self.of(i).iter().filter(|&&j| !is_moved[j as usize]);
-                            merge_ascending(kept.copied(), gained_of(i), &mut list);
-                        }
-                    }
-                    counts.push(list.len() - before);
-                }
-                (counts, list)
-            })
-            .collect();
-        Self::from_chunks(self.cutoff_m, self.period_x_m, self.mirror, chunks)
+        Self::by_rows(n, self.cutoff_m, self.period_x_m, self.mirror, |i, list| {
+            if !holds_list(i) {
+                return;
+            }
+            if let Some(k) = row_of_moved(i) {
+                list.extend_from_slice(moved_lists.of(k));
+            } else if let Ok(k) = new_holders.binary_search(&(i as u32)) {
+                list.extend_from_slice(new_holder_lists.of(k));
+            } else {
+                // Both ascending: merge the kept entries with the gained ones.
+                let kept = self.of(i).iter().filter(|&&j| !is_moved[j as usize]);
+                merge_ascending(kept.copied(), gained_of(i), list);
+            }
+        })
     }
 
     fn build_general<const D: usize>(
@@ -619,29 +627,16 @@ impl<const D: usize> CellGrid<D> {
         active: &(impl Fn(usize) -> bool + Sync),
         centre: &(impl Fn(usize) -> bool + Sync),
     ) -> Neighbours {
-        let n = positions.len();
-        let chunks: Vec<(Vec<usize>, Vec<u32>)> = (0..n.div_ceil(LIST_CHUNK))
-            .into_par_iter()
-            .with_max_len(1)
-            .map(|chunk| {
-                let range = chunk * LIST_CHUNK..((chunk + 1) * LIST_CHUNK).min(n);
-                let mut counts = Vec::with_capacity(range.len());
-                let mut list = Vec::with_capacity(range.len() * 32);
-                for i in range {
-                    let before = list.len();
-                    if active(i) && centre(i) {
-                        self.append_neighbours(positions, i, active, &mut list);
-                    }
-                    counts.push(list.len() - before);
-                }
-                (counts, list)
-            })
-            .collect();
-        Neighbours::from_chunks(
+        Neighbours::by_rows(
+            positions.len(),
             self.cutoff_m,
             self.period_x_m,
             MirrorPlanes::default(),
-            chunks,
+            |i, list| {
+                if active(i) && centre(i) {
+                    self.append_neighbours(positions, i, active, list);
+                }
+            },
         )
     }
 
