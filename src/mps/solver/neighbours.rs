@@ -20,8 +20,8 @@ const MOVED_SHARE_FOR_WHOLE_BUILD: usize = 4;
 
 impl<const D: usize> Solver<D> {
     /// Neighbour lists of the active particles at the current positions.
-    /// Makes sure the lists hold every active pair closer than the Laplacian radius: rebuilt
-    /// when some particle has moved more than half the skin since the last build.
+    /// Makes sure the lists hold every active pair closer than the Laplacian radius: renewed
+    /// when some particle has moved half the skin from its reference position (`refresh_lists`).
     pub(super) fn rebuild_neighbours(&mut self) {
         let started = Instant::now();
         self.wrap_periodic();
@@ -124,6 +124,7 @@ impl<const D: usize> Solver<D> {
         let faces_read_lists = self.config.wall_surface_no_slip && self.config.wall_face_normals;
         if listed > 0
             && listed <= n
+            && (listed..n).all(active)
             && !self.fresh_lists
             && !faces_read_lists
             && self.config.symmetry.is_empty()
