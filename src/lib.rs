@@ -9,6 +9,7 @@ pub mod record;
 pub mod report;
 pub mod restore;
 pub mod resume;
+pub mod rng;
 pub mod run;
 pub mod sweep_run;
 pub mod verify;

@@ -437,11 +437,17 @@ impl Neighbours {
         let n = positions.len();
         let listed_before = self.offsets.len() - 1;
         debug_assert!(moved.windows(2).all(|w| w[0] < w[1]));
-        debug_assert!((listed_before..n).all(|i| moved.binary_search(&(i as u32)).is_ok()));
-        let mut is_moved = vec![false; n];
-        for &s in moved {
-            is_moved[s as usize] = true;
+        assert!(
+            (listed_before..n).all(|i| moved.binary_search(&(i as u32)).is_ok()),
+            "every particle past the lists must be among the moved"
+        );
+        // Row of each moved particle in `moved` (NOT_MOVED for the others).
+        const NOT_MOVED: u32 = u32::MAX;
+        let mut row_of = vec![NOT_MOVED; n];
+        for (k, &s) in moved.iter().enumerate() {
+            row_of[s as usize] = k as u32;
         }
+        let is_moved = |j: u32| row_of[j as usize] != NOT_MOVED;
         let grid = CellGrid::new(positions, self.cutoff_m, self.period_x_m);
         // Every moved particle's neighbours (row k: particle moved[k]), holder or not: they
         // are also where the moved particle enters the others' lists (the cut is symmetric).
@@ -475,7 +481,6 @@ impl Neighbours {
         let is_centre = |j: u32| active(j as usize) && centre(j as usize);
         // A `then` particle has a list when some centre lies within the cutoff: one that did
         // not move and was in its list, or a moved one that now is.
-        let row_of_moved = |i: usize| moved.binary_search(&(i as u32)).ok();
         let holds_list = |i: usize| {
             if !active(i) {
                 return false;
@@ -486,27 +491,22 @@ impl Neighbours {
             if !then(i) {
                 return false;
             }
-            match row_of_moved(i) {
-                Some(k) => moved_lists.of(k).iter().any(|&j| is_centre(j)),
-                None => {
-                    let kept = i < listed_before
-                        && self
-                            .of(i)
-                            .iter()
-                            .any(|&j| !is_moved[j as usize] && is_centre(j));
-                    kept || gained_of(i).iter().any(|&j| is_centre(j))
-                }
+            if is_moved(i as u32) {
+                return moved_lists
+                    .of(row_of[i] as usize)
+                    .iter()
+                    .any(|&j| is_centre(j));
             }
+            let kept = self.of(i).iter().any(|&j| !is_moved(j) && is_centre(j));
+            kept || gained_of(i).iter().any(|&j| is_centre(j))
         };
-        // Particles that did not move and hold a list now but held none: searched whole.
+        // Particles that did not move (so were listed before) and hold a list now but held
+        // none: searched whole. A centre always held its (possibly empty) list.
         let new_holders: Vec<u32> = (0..n)
             .into_par_iter()
             .with_min_len(LIST_CHUNK)
             .filter(|&i| {
-                !is_moved[i] && (i >= listed_before || self.of(i).is_empty()) && {
-                    // A centre always held its (possibly empty) list.
-                    !centre(i) && holds_list(i)
-                }
+                !is_moved(i as u32) && !centre(i) && self.of(i).is_empty() && holds_list(i)
             })
             .map(|i| i as u32)
             .collect();
@@ -515,13 +515,13 @@ impl Neighbours {
             if !holds_list(i) {
                 return;
             }
-            if let Some(k) = row_of_moved(i) {
-                list.extend_from_slice(moved_lists.of(k));
+            if is_moved(i as u32) {
+                list.extend_from_slice(moved_lists.of(row_of[i] as usize));
             } else if let Ok(k) = new_holders.binary_search(&(i as u32)) {
                 list.extend_from_slice(new_holder_lists.of(k));
             } else {
                 // Both ascending: merge the kept entries with the gained ones.
-                let kept = self.of(i).iter().filter(|&&j| !is_moved[j as usize]);
+                let kept = self.of(i).iter().filter(|&&j| !is_moved(j));
                 merge_ascending(kept.copied(), gained_of(i), list);
             }
         })
@@ -790,46 +790,37 @@ impl KernelPairs {
 mod tests {
     use super::*;
 
-    /// A small deterministic generator (SplitMix64) for the scattered particles below.
-    fn uniform(state: &mut u64) -> f64 {
-        *state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = *state;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        (z ^ (z >> 31)) as f64 / u64::MAX as f64
-    }
-
     /// An update equals the whole build at the new positions, entry for entry, in 2D and 3D,
     /// periodic or not: fluid moved (some far, into walls' reach and out of it), walls moved,
     /// particles appended, a ghost that never gets a list.
     fn check_update_equals_build<const D: usize>(period_x_m: Option<f64>, seed: u64) {
-        let mut state = seed;
+        let mut rng = crate::rng::SplitMix64::new(seed);
         // A few neighbours each, so that some walls have no fluid in reach.
         let (n0, added) = (900usize, 40usize);
         let cutoff_m = if D == 2 { 0.025 } else { 0.05 };
         let side_m = 0.6;
         // 0 fluid, 1 wall, 2 dummy, 3 ghost.
         let mut kinds: Vec<u8> = (0..n0)
-            .map(|_| match (uniform(&mut state) * 10.0) as u8 {
+            .map(|_| match (rng.unit() * 10.0) as u8 {
                 0..=4 => 0,
                 5..=7 => 1,
                 8 => 2,
                 _ => 3,
             })
             .collect();
-        let point = |state: &mut u64| Vector::<D>::from_fn(|_, _| side_m * uniform(state));
-        let before: Vec<Vector<D>> = (0..n0).map(|_| point(&mut state)).collect();
+        let point =
+            |rng: &mut crate::rng::SplitMix64| Vector::<D>::from_fn(|_, _| side_m * rng.unit());
+        let before: Vec<Vector<D>> = (0..n0).map(|_| point(&mut rng)).collect();
         kinds.extend(std::iter::repeat_n(0, added));
         let mut after = before.clone();
-        after.extend((0..added).map(|_| point(&mut state)));
+        after.extend((0..added).map(|_| point(&mut rng)));
         let mut moved: Vec<u32> = Vec::new();
         for i in 0..n0 + added {
-            let far = uniform(&mut state) < 0.1;
+            let far = rng.unit() < 0.1;
             if (i >= n0 || far) && kinds[i] != 3 {
                 if i < n0 {
                     // Up to two cutoffs in any direction, kept inside the box.
-                    let step =
-                        Vector::<D>::from_fn(|_, _| (uniform(&mut state) - 0.5) * 4.0 * cutoff_m);
+                    let step = Vector::<D>::from_fn(|_, _| (rng.unit() - 0.5) * 4.0 * cutoff_m);
                     after[i] = (after[i] + step).map(|x| x.clamp(0.0, side_m * 0.999));
                 }
                 moved.push(i as u32);

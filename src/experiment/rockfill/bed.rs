@@ -16,6 +16,7 @@
 //! A + B cos(phi) + C sin(phi) or of a quadratic, solved in closed form. Only `+ - * /`,
 //! `sqrt` and `libm`'s `acos` and `atan2` are used, so the same seed gives the same bed bit
 //! for bit on every machine (DESIGN.md section 6).
+pub use crate::rng::SplitMix64;
 use crate::mps::Vector;
 use std::f64::consts::PI;
 
@@ -25,30 +26,6 @@ const MAX_EVENTS: usize = 256;
 const FORCE_TOLERANCE: f64 = 1e-12;
 /// Relative tolerance of a contact (distance against the sum of the radii).
 const CONTACT_TOLERANCE: f64 = 1e-12;
-
-/// SplitMix64 (Steele, Lea & Flood 2014): a fixed, documented generator whose sequence for a
-/// seed is the same on every platform and in every version of this program.
-#[derive(Debug, Clone)]
-pub struct SplitMix64 {
-    state: u64,
-}
-
-impl SplitMix64 {
-    pub fn new(seed: u64) -> Self {
-        Self { state: seed }
-    }
-    pub fn next_u64(&mut self) -> u64 {
-        self.state = self.state.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.state;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-    /// A uniform number in [0, 1): the top 53 bits over 2^53.
-    pub fn unit(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
-    }
-}
 
 /// How rock diameters are drawn.
 #[derive(Debug, Clone, PartialEq)]
