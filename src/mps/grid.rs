@@ -189,12 +189,13 @@ impl Neighbours {
             inner_m,
             |i| if keep(i) { Cut::Always } else { Cut::Never },
             |_| false,
+            (Self::default(), Self::default()),
         )
     }
 
     /// As [`Neighbours::within_two`], each particle cut as `cut(i)` says; a
     /// [`Cut::IfFluidWithin`] particle keeps its pairs only when one of them within `outer_m`
-    /// is fluid (`is_fluid`).
+    /// is fluid (`is_fluid`). `reuse` lends the storage of earlier cuts (outer, inner).
     fn within_two_by<const D: usize>(
         &self,
         positions: &[Vector<D>],
@@ -202,60 +203,110 @@ impl Neighbours {
         inner_m: f64,
         cut: impl Fn(usize) -> Cut + Sync,
         is_fluid: impl Fn(usize) -> bool + Sync,
+        reuse: (Self, Self),
     ) -> (Self, Self) {
         debug_assert!(inner_m <= outer_m);
         let (outer2, inner2) = (sqrt_threshold(outer_m), sqrt_threshold(inner_m));
         let n = self.offsets.len() - 1;
-        type Chunk = (Vec<usize>, Vec<u32>);
-        let chunks: Vec<(Chunk, Chunk)> = (0..n.div_ceil(FILTER_CHUNK))
-            .into_par_iter()
-            .with_max_len(1)
-            .map(|chunk| {
-                let range = chunk * FILTER_CHUNK..((chunk + 1) * FILTER_CHUNK).min(n);
-                // Room for every candidate; written without a branch per pair (about a third of
-                // the candidates fail, in no predictable pattern), then cut to length.
-                let capacity = self.offsets[range.end] - self.offsets[range.start];
-                let (mut outer, mut inner) = (vec![0u32; capacity], vec![0u32; capacity]);
-                let (mut counts_outer, mut counts_inner) = (
-                    Vec::with_capacity(range.len()),
-                    Vec::with_capacity(range.len()),
-                );
+        let plain = self.mirror.is_empty() && self.period_x_m.is_none();
+        // Each row's pairs are written where the row lies in `self` (room for every
+        // candidate, without a branch per pair: about a third fail, in no predictable
+        // pattern), in parallel over fixed chunks of rows, then moved together.
+        let total = self.offsets[n];
+        let (mut outer, mut inner) = reuse;
+        for buffer in [&mut outer.indices, &mut inner.indices] {
+            if buffer.len() < total {
+                buffer.resize(total, 0);
+            }
+        }
+        let (mut counts_outer, mut counts_inner) = (vec![0usize; n], vec![0usize; n]);
+        let chunk_rows = |chunk: usize| chunk * FILTER_CHUNK..((chunk + 1) * FILTER_CHUNK).min(n);
+        let chunks = n.div_ceil(FILTER_CHUNK);
+        let mut regions = Vec::with_capacity(chunks);
+        let (mut rest_outer, mut rest_inner) =
+            (&mut outer.indices[..total], &mut inner.indices[..total]);
+        let (mut rest_counts_outer, mut rest_counts_inner) =
+            (&mut counts_outer[..], &mut counts_inner[..]);
+        for chunk in 0..chunks {
+            let rows = chunk_rows(chunk);
+            let room = self.offsets[rows.end] - self.offsets[rows.start];
+            let (o, tail_o) = std::mem::take(&mut rest_outer).split_at_mut(room);
+            let (i, tail_i) = std::mem::take(&mut rest_inner).split_at_mut(room);
+            let (co, tail_co) = std::mem::take(&mut rest_counts_outer).split_at_mut(rows.len());
+            let (ci, tail_ci) = std::mem::take(&mut rest_counts_inner).split_at_mut(rows.len());
+            (rest_outer, rest_inner) = (tail_o, tail_i);
+            (rest_counts_outer, rest_counts_inner) = (tail_co, tail_ci);
+            regions.push((rows, o, i, co, ci));
+        }
+        regions.into_par_iter().with_max_len(1).for_each(
+            |(rows, outer, inner, counts_outer, counts_inner)| {
                 let (mut len_outer, mut len_inner) = (0, 0);
-                for i in range {
+                for (k, i) in rows.enumerate() {
                     let before = (len_outer, len_inner);
                     let how = cut(i);
                     if how != Cut::Never {
-                        let check = how == Cut::IfFluidWithin;
-                        let mut fluid_within = false;
-                        for &j in self.of(i) {
-                            // |r| < radius exactly when |r|^2 < the radius' threshold.
-                            let d2 = self.displacement(positions, i, j).norm_squared();
-                            outer[len_outer] = j;
-                            inner[len_inner] = j;
-                            let in_outer = d2 > 0.0 && d2 < outer2;
-                            len_outer += usize::from(in_outer);
-                            len_inner += usize::from(d2 > 0.0 && d2 < inner2);
-                            if check && in_outer {
-                                fluid_within |= is_fluid(entry_index(j));
+                        let row = self.of(i);
+                        if plain {
+                            let (o, n_in) = cut_plain_row(
+                                row,
+                                positions[i],
+                                positions,
+                                (outer2, inner2),
+                                &mut outer[len_outer..len_outer + row.len()],
+                                &mut inner[len_inner..len_inner + row.len()],
+                            );
+                            len_outer += o;
+                            len_inner += n_in;
+                        } else {
+                            for &j in row {
+                                let d2 = self.displacement(positions, i, j).norm_squared();
+                                outer[len_outer] = j;
+                                inner[len_inner] = j;
+                                len_outer += usize::from(d2 > 0.0 && d2 < outer2);
+                                len_inner += usize::from(d2 > 0.0 && d2 < inner2);
                             }
                         }
-                        if check && !fluid_within {
+                        // The kept pairs within the outer radius name any fluid there (from
+                        // the end: poured fluid comes last).
+                        if how == Cut::IfFluidWithin
+                            && !outer[before.0..len_outer]
+                                .iter()
+                                .rev()
+                                .any(|&j| is_fluid(entry_index(j)))
+                        {
                             (len_outer, len_inner) = before;
                         }
                     }
-                    counts_outer.push(len_outer - before.0);
-                    counts_inner.push(len_inner - before.1);
+                    counts_outer[k] = len_outer - before.0;
+                    counts_inner[k] = len_inner - before.1;
                 }
-                outer.truncate(len_outer);
-                inner.truncate(len_inner);
-                ((counts_outer, outer), (counts_inner, inner))
-            })
-            .collect();
-        let (outer, inner): (Vec<Chunk>, Vec<Chunk>) = chunks.into_iter().unzip();
-        (
-            Self::from_chunks(outer_m, self.period_x_m, self.mirror, outer),
-            Self::from_chunks(inner_m, self.period_x_m, self.mirror, inner),
-        )
+            },
+        );
+        // Each chunk's pairs moved down to follow the last: a chunk's pairs start where its
+        // rows start in `self`, at or after where they go.
+        let gather = |lists: &mut Self, counts: &[usize], cutoff_m: f64| {
+            lists.offsets.clear();
+            lists.offsets.reserve(n + 1);
+            lists.offsets.push(0);
+            let mut end = 0;
+            for chunk in 0..chunks {
+                let rows = chunk_rows(chunk);
+                let from = self.offsets[rows.start];
+                let kept: usize = counts[rows.clone()].iter().sum();
+                lists.indices.copy_within(from..from + kept, end);
+                for &c in &counts[rows] {
+                    end += c;
+                    lists.offsets.push(end);
+                }
+            }
+            lists.indices.truncate(end);
+            lists.cutoff_m = cutoff_m;
+            lists.period_x_m = self.period_x_m;
+            lists.mirror = self.mirror;
+        };
+        gather(&mut outer, &counts_outer, outer_m);
+        gather(&mut inner, &counts_inner, inner_m);
+        (outer, inner)
     }
 
     /// Marks every particle that is in some list, over `n` particles.
@@ -324,13 +375,25 @@ impl Neighbours {
     ) -> Self {
         let mut offsets = Vec::with_capacity(chunks.iter().map(|c| c.0.len()).sum::<usize>() + 1);
         offsets.push(0);
-        let mut indices = Vec::with_capacity(chunks.iter().map(|c| c.1.len()).sum());
-        for (counts, list) in chunks {
+        for (counts, _) in &chunks {
             for c in counts {
                 offsets.push(offsets.last().unwrap() + c);
             }
-            indices.extend_from_slice(&list);
         }
+        // Each chunk's entries copied to their place in parallel (a copy in one thread was a
+        // few per cent of a 3D run).
+        let mut indices = vec![0u32; *offsets.last().unwrap()];
+        let mut slots = Vec::with_capacity(chunks.len());
+        let mut rest = indices.as_mut_slice();
+        for (_, list) in &chunks {
+            let (slot, tail) = rest.split_at_mut(list.len());
+            slots.push(slot);
+            rest = tail;
+        }
+        slots
+            .into_par_iter()
+            .zip(chunks.par_iter())
+            .for_each(|(slot, (_, list))| slot.copy_from_slice(list));
         Self {
             cutoff_m,
             period_x_m,
@@ -709,6 +772,33 @@ fn merge_ascending(a: impl Iterator<Item = u32>, b: &[u32], out: &mut Vec<u32>) 
     out.extend(b);
 }
 
+/// The entries of `row` (plain indices, no images) closer to `x_i` than the two thresholds
+/// on |r|^2 ([`sqrt_threshold`]; coincident points excluded), written in order to the fronts
+/// of `outer` and `inner` (each as long as `row`): their counts. A loop of its own, so that
+/// nothing else competes for its registers.
+#[inline(never)]
+fn cut_plain_row<const D: usize>(
+    row: &[u32],
+    x_i: Vector<D>,
+    positions: &[Vector<D>],
+    (outer2, inner2): (f64, f64),
+    outer: &mut [u32],
+    inner: &mut [u32],
+) -> (usize, usize) {
+    let (mut o, mut n_in) = (0, 0);
+    for &j in row {
+        // r = x_j - x_i, as `Neighbours::displacement` gives it without images.
+        let d2 = (positions[j as usize] - x_i).norm_squared();
+        outer[o] = j;
+        inner[n_in] = j;
+        // `&`, not `&&`: no branch to mispredict.
+        let apart = d2 > 0.0;
+        o += usize::from(apart & (d2 < outer2));
+        n_in += usize::from(apart & (d2 < inner2));
+    }
+    (o, n_in)
+}
+
 /// Which pairs of a particle's list [`Neighbours::within_two_by`] keeps.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Cut {
@@ -761,12 +851,14 @@ impl KernelPairs {
     /// other particles get none. One pass: a wall particle's own list holds every fluid
     /// particle whose list holds it (lists are symmetric among their centres, and a wall
     /// near no fluid at the last build has no list and no fluid within reach now).
+    /// `reuse` lends the storage of an earlier cut (none allocated when it is large enough).
     pub fn near_fluid<const D: usize>(
         lists: &Neighbours,
         positions: &[Vector<D>],
         radius_n_m: f64,
         radius_lap_m: f64,
         is_fluid: impl Fn(usize) -> bool + Sync,
+        reuse: Self,
     ) -> Self {
         let radius = radius_lap_m.max(radius_n_m);
         let (lap, near) = lists.within_two_by(
@@ -781,6 +873,7 @@ impl KernelPairs {
                 }
             },
             &is_fluid,
+            (reuse.lap, reuse.near),
         );
         Self { near, lap }
     }

@@ -40,12 +40,14 @@ impl<const D: usize> Solver<D> {
         let started = Instant::now();
         let r = &self.refs;
         let kind = &self.particles.kind;
+        let earlier = std::mem::take(&mut self.pairs);
         self.pairs = KernelPairs::near_fluid(
             &self.neighbours,
             &self.particles.position_m,
             r.radius_n_m,
             r.radius_lap_m,
             |i| kind[i] == ParticleKind::Fluid,
+            earlier,
         );
         self.paired_at_m.clone_from(&self.particles.position_m);
         self.timing.kernel_pairs_s += started.elapsed().as_secs_f64();
