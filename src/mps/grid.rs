@@ -208,7 +208,6 @@ impl Neighbours {
         debug_assert!(inner_m <= outer_m);
         let (outer2, inner2) = (sqrt_threshold(outer_m), sqrt_threshold(inner_m));
         let n = self.offsets.len() - 1;
-        let plain = self.mirror.is_empty() && self.period_x_m.is_none();
         // Each row's pairs are written where the row lies in `self` (room for every
         // candidate, without a branch per pair: about a third fail, in no predictable
         // pattern), in parallel over fixed chunks of rows, then moved together.
@@ -246,25 +245,29 @@ impl Neighbours {
                     let how = cut(i);
                     if how != Cut::Never {
                         let row = self.of(i);
-                        if plain {
-                            let (o, n_in) = cut_plain_row(
-                                row,
-                                positions[i],
-                                positions,
-                                (outer2, inner2),
-                                &mut outer[len_outer..len_outer + row.len()],
-                                &mut inner[len_inner..len_inner + row.len()],
-                            );
-                            len_outer += o;
-                            len_inner += n_in;
+                        // Without a period, the plain entries (mirror images come last, see
+                        // `Neighbours`) are cut in a loop of their own.
+                        let plain = if self.period_x_m.is_none() {
+                            row.partition_point(|&e| e >> MIRROR_SHIFT == 0)
                         } else {
-                            for &j in row {
-                                let d2 = self.displacement(positions, i, j).norm_squared();
-                                outer[len_outer] = j;
-                                inner[len_inner] = j;
-                                len_outer += usize::from(d2 > 0.0 && d2 < outer2);
-                                len_inner += usize::from(d2 > 0.0 && d2 < inner2);
-                            }
+                            0
+                        };
+                        let (o, n_in) = cut_plain_row(
+                            &row[..plain],
+                            positions[i],
+                            positions,
+                            (outer2, inner2),
+                            &mut outer[len_outer..len_outer + plain],
+                            &mut inner[len_inner..len_inner + plain],
+                        );
+                        len_outer += o;
+                        len_inner += n_in;
+                        for &j in &row[plain..] {
+                            let d2 = self.displacement(positions, i, j).norm_squared();
+                            outer[len_outer] = j;
+                            inner[len_inner] = j;
+                            len_outer += usize::from(d2 > 0.0 && d2 < outer2);
+                            len_inner += usize::from(d2 > 0.0 && d2 < inner2);
                         }
                         // The kept pairs within the outer radius name any fluid there (from
                         // the end: poured fluid comes last).
