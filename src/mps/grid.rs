@@ -378,25 +378,13 @@ impl Neighbours {
     ) -> Self {
         let mut offsets = Vec::with_capacity(chunks.iter().map(|c| c.0.len()).sum::<usize>() + 1);
         offsets.push(0);
-        for (counts, _) in &chunks {
+        let mut indices = Vec::with_capacity(chunks.iter().map(|c| c.1.len()).sum());
+        for (counts, list) in chunks {
             for c in counts {
                 offsets.push(offsets.last().unwrap() + c);
             }
+            indices.extend_from_slice(&list);
         }
-        // Each chunk's entries copied to their place in parallel (a copy in one thread was a
-        // few per cent of a 3D run).
-        let mut indices = vec![0u32; *offsets.last().unwrap()];
-        let mut slots = Vec::with_capacity(chunks.len());
-        let mut rest = indices.as_mut_slice();
-        for (_, list) in &chunks {
-            let (slot, tail) = rest.split_at_mut(list.len());
-            slots.push(slot);
-            rest = tail;
-        }
-        slots
-            .into_par_iter()
-            .zip(chunks.par_iter())
-            .for_each(|(slot, (_, list))| slot.copy_from_slice(list));
         Self {
             cutoff_m,
             period_x_m,
