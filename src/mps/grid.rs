@@ -224,21 +224,20 @@ impl Neighbours {
         let mut regions = Vec::with_capacity(chunks);
         let (mut rest_outer, mut rest_inner) =
             (&mut outer.indices[..total], &mut inner.indices[..total]);
-        let (mut rest_counts_outer, mut rest_counts_inner) =
-            (&mut counts_outer[..], &mut counts_inner[..]);
         for chunk in 0..chunks {
             let rows = chunk_rows(chunk);
             let room = self.offsets[rows.end] - self.offsets[rows.start];
             let (o, tail_o) = std::mem::take(&mut rest_outer).split_at_mut(room);
             let (i, tail_i) = std::mem::take(&mut rest_inner).split_at_mut(room);
-            let (co, tail_co) = std::mem::take(&mut rest_counts_outer).split_at_mut(rows.len());
-            let (ci, tail_ci) = std::mem::take(&mut rest_counts_inner).split_at_mut(rows.len());
             (rest_outer, rest_inner) = (tail_o, tail_i);
-            (rest_counts_outer, rest_counts_inner) = (tail_co, tail_ci);
-            regions.push((rows, o, i, co, ci));
+            regions.push((rows, o, i));
         }
-        regions.into_par_iter().with_max_len(1).for_each(
-            |(rows, outer, inner, counts_outer, counts_inner)| {
+        regions
+            .into_par_iter()
+            .zip(counts_outer.par_chunks_mut(FILTER_CHUNK))
+            .zip(counts_inner.par_chunks_mut(FILTER_CHUNK))
+            .with_max_len(1)
+            .for_each(|(((rows, outer, inner), counts_outer), counts_inner)| {
                 let (mut len_outer, mut len_inner) = (0, 0);
                 for (k, i) in rows.enumerate() {
                     let before = (len_outer, len_inner);
@@ -247,6 +246,7 @@ impl Neighbours {
                         let row = self.of(i);
                         // Without a period, the plain entries (mirror images come last, see
                         // `Neighbours`) are cut in a loop of their own.
+                        debug_assert!(row.is_sorted(), "row {i} out of order");
                         let plain = if self.period_x_m.is_none() {
                             row.partition_point(|&e| e >> MIRROR_SHIFT == 0)
                         } else {
@@ -283,8 +283,7 @@ impl Neighbours {
                     counts_outer[k] = len_outer - before.0;
                     counts_inner[k] = len_inner - before.1;
                 }
-            },
-        );
+            });
         // Each chunk's pairs moved down to follow the last: a chunk's pairs start where its
         // rows start in `self`, at or after where they go.
         let gather = |lists: &mut Self, counts: &[usize], cutoff_m: f64| {
@@ -945,6 +944,143 @@ mod tests {
             check_update_equals_build::<3>(None, seed);
             check_update_equals_build::<2>(Some(0.6), seed);
             check_update_equals_build::<3>(Some(0.6), seed);
+        }
+    }
+
+    /// The kernel-pair cut keeps, row by row and in order, exactly the entries within each
+    /// radius (by `displacement`, the general path), walls only with fluid within the outer
+    /// one; the same with storage lent by a cut of other lists. 2D and 3D, plain, periodic and
+    /// with a mirror plane.
+    fn check_cut_equals_the_definition<const D: usize>(
+        period_x_m: Option<f64>,
+        mirror: MirrorPlanes,
+        seed: u64,
+    ) {
+        let mut rng = crate::rng::SplitMix64::new(seed);
+        let n = 1200usize;
+        let (cutoff_m, side_m) = (if D == 2 { 0.03 } else { 0.06 }, 0.6);
+        let (outer_m, inner_m) = (0.8 * cutoff_m, 0.5 * cutoff_m);
+        // 0 fluid, 1 wall, 2 dummy, 3 ghost.
+        let mut kinds: Vec<u8> = (0..n)
+            .map(|_| match (rng.unit() * 10.0) as u8 {
+                0..=3 => 0,
+                4..=7 => 1,
+                8 => 2,
+                _ => 3,
+            })
+            .collect();
+        let mut listed: Vec<Vector<D>> = (0..n)
+            .map(|_| Vector::<D>::from_fn(|_, _| side_m * (0.001 + 0.998 * rng.unit())))
+            .collect();
+        // Two fluid particles that meet.
+        (kinds[0], kinds[1]) = (0, 0);
+        listed[1] = listed[0] + Vector::<D>::from_element(0.1 * cutoff_m);
+        // Moved within a tenth of the cutoff since the lists were made; one pair coincident.
+        let mut now: Vec<Vector<D>> = listed
+            .iter()
+            .map(|x| x + Vector::<D>::from_fn(|_, _| (rng.unit() - 0.5) * 0.1 * cutoff_m))
+            .map(|x| x.map(|c| c.clamp(0.0005, side_m - 0.0005)))
+            .collect();
+        now[1] = now[0];
+        let k = &kinds;
+        let lists = Neighbours::build_centres_then_listed(
+            &listed,
+            cutoff_m,
+            period_x_m,
+            mirror,
+            |i| k[i] != 3,
+            |i| k[i] == 0,
+            |i| k[i] == 1,
+        );
+        let is_fluid = |i: usize| k[i] == 0;
+        let fresh = KernelPairs::near_fluid(
+            &lists,
+            &now,
+            inner_m,
+            outer_m,
+            is_fluid,
+            KernelPairs::default(),
+        );
+        // Storage lent by a cut of longer lists, its contents stale.
+        let longer = Neighbours::build_centres_then_listed(
+            &listed,
+            1.5 * cutoff_m,
+            period_x_m,
+            mirror,
+            |i| k[i] != 3,
+            |i| k[i] == 0,
+            |i| k[i] == 1,
+        );
+        let lent = KernelPairs::near_fluid(
+            &longer,
+            &now,
+            inner_m,
+            outer_m,
+            is_fluid,
+            KernelPairs::default(),
+        );
+        let reused = KernelPairs::near_fluid(&lists, &now, inner_m, outer_m, is_fluid, lent);
+        let within = |i: usize, radius_m: f64| -> Vec<u32> {
+            let t = sqrt_threshold(radius_m);
+            lists
+                .of(i)
+                .iter()
+                .copied()
+                .filter(|&e| {
+                    let d2 = lists.displacement(&now, i, e).norm_squared();
+                    d2 > 0.0 && d2 < t
+                })
+                .collect()
+        };
+        let (mut walls_kept, mut walls_dropped) = (0, 0);
+        for (i, &kind) in kinds.iter().enumerate() {
+            let outer = within(i, outer_m);
+            let keep = is_fluid(i) || outer.iter().any(|&e| is_fluid(entry_index(e)));
+            if kind == 1 && !lists.of(i).is_empty() {
+                if keep {
+                    walls_kept += 1;
+                } else {
+                    walls_dropped += 1;
+                }
+            }
+            let (outer, inner) = if keep {
+                (outer, within(i, inner_m))
+            } else {
+                (Vec::new(), Vec::new())
+            };
+            for pairs in [&fresh, &reused] {
+                assert_eq!(pairs.lap.of(i), outer, "outer pairs of {i}");
+                assert_eq!(pairs.near.of(i), inner, "inner pairs of {i}");
+            }
+        }
+        assert!(
+            walls_kept > 0 && walls_dropped > 0,
+            "{walls_kept} {walls_dropped}"
+        );
+        // Each radius cut some entries, and the coincident pair is not one.
+        assert!(fresh.near.indices.len() < fresh.lap.indices.len());
+        assert!(fresh.lap.indices.len() < lists.indices.len());
+        assert!(lists.of(0).contains(&1) && !fresh.lap.of(0).contains(&1));
+        if !mirror.is_empty() {
+            assert!(fresh.lap.indices.iter().any(|&e| e >> MIRROR_SHIFT != 0));
+        }
+    }
+
+    #[test]
+    fn the_cut_keeps_exactly_the_pairs_within_each_radius() {
+        let plane = MirrorPlanes {
+            axes: 1,
+            position_m: [0.0; 3],
+        };
+        for seed in 1..3 {
+            for (period, mirror) in [
+                (None, MirrorPlanes::default()),
+                (Some(0.6), MirrorPlanes::default()),
+                (None, plane),
+            ] {
+                check_cut_equals_the_definition::<2>(period, mirror, seed);
+                check_cut_equals_the_definition::<3>(period, mirror, seed);
+            }
         }
     }
 
