@@ -873,6 +873,19 @@ impl KernelPairs {
 mod tests {
     use super::*;
 
+    /// Kinds drawn at random: 0 fluid (`fluid_tenths` in ten), 1 wall (up to eight in ten),
+    /// 2 dummy (one in ten), 3 ghost (the rest).
+    fn random_kinds(rng: &mut crate::rng::SplitMix64, n: usize, fluid_tenths: u8) -> Vec<u8> {
+        (0..n)
+            .map(|_| match (rng.unit() * 10.0) as u8 {
+                d if d < fluid_tenths => 0,
+                0..=7 => 1,
+                8 => 2,
+                _ => 3,
+            })
+            .collect()
+    }
+
     /// An update equals the whole build at the new positions, entry for entry, in 2D and 3D,
     /// periodic or not: fluid moved (some far, into walls' reach and out of it), walls moved,
     /// particles appended, a ghost that never gets a list.
@@ -882,15 +895,7 @@ mod tests {
         let (n0, added) = (900usize, 40usize);
         let cutoff_m = if D == 2 { 0.025 } else { 0.05 };
         let side_m = 0.6;
-        // 0 fluid, 1 wall, 2 dummy, 3 ghost.
-        let mut kinds: Vec<u8> = (0..n0)
-            .map(|_| match (rng.unit() * 10.0) as u8 {
-                0..=4 => 0,
-                5..=7 => 1,
-                8 => 2,
-                _ => 3,
-            })
-            .collect();
+        let mut kinds = random_kinds(&mut rng, n0, 5);
         let point =
             |rng: &mut crate::rng::SplitMix64| Vector::<D>::from_fn(|_, _| side_m * rng.unit());
         let before: Vec<Vector<D>> = (0..n0).map(|_| point(&mut rng)).collect();
@@ -960,15 +965,7 @@ mod tests {
         let n = 1200usize;
         let (cutoff_m, side_m) = (if D == 2 { 0.03 } else { 0.06 }, 0.6);
         let (outer_m, inner_m) = (0.8 * cutoff_m, 0.5 * cutoff_m);
-        // 0 fluid, 1 wall, 2 dummy, 3 ghost.
-        let mut kinds: Vec<u8> = (0..n)
-            .map(|_| match (rng.unit() * 10.0) as u8 {
-                0..=3 => 0,
-                4..=7 => 1,
-                8 => 2,
-                _ => 3,
-            })
-            .collect();
+        let mut kinds = random_kinds(&mut rng, n, 4);
         let mut listed: Vec<Vector<D>> = (0..n)
             .map(|_| Vector::<D>::from_fn(|_, _| side_m * (0.001 + 0.998 * rng.unit())))
             .collect();
