@@ -229,7 +229,23 @@ impl Coarse {
 
 /// residual = r - A z, row by row.
 fn residual_of(a: &CsrMatrix, z: &[f64], r: &[f64], residual: &mut [f64]) {
-    for_rows(residual, |i, out| *out = r[i] - a.row_value(i, z));
+    // A z by rows side by side (the bits of `row_value`), then r - A z.
+    let (z, _) = z.as_chunks::<1>();
+    let rows = |first: usize, out: &mut [f64]| {
+        let (az, _) = out.as_chunks_mut::<1>();
+        a.products_into(first, z, az);
+        for (k, o) in out.iter_mut().enumerate() {
+            *o = r[first + k] - *o;
+        }
+    };
+    if residual.len() < PARALLEL_ROWS {
+        rows(0, residual);
+    } else {
+        residual
+            .par_chunks_mut(ROWS_PER_TASK)
+            .enumerate()
+            .for_each(|(c, chunk)| rows(c * ROWS_PER_TASK, chunk));
+    }
 }
 
 /// Rows below which a level's loops run on the calling thread: handing work to threads costs

@@ -148,9 +148,9 @@ pub fn solve_pcg_many<const M: usize>(
             .enumerate()
             .map(|(c, ap)| {
                 let mut s = [0.0; M];
-                for (k, ap) in ap.iter_mut().enumerate() {
+                a.products_into(c * CHUNK, &p, ap);
+                for (k, ap) in ap.iter().enumerate() {
                     let i = c * CHUNK + k;
-                    *ap = a.row_product(i, &p);
                     for m in 0..M {
                         s[m] += p[i][m] * ap[m];
                     }

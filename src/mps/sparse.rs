@@ -4,6 +4,9 @@ use super::grid::{Neighbours, entry_index};
 use super::reduce::{MIN_PARALLEL_LEN, PARTICLES_PER_TASK};
 use rayon::prelude::*;
 
+/// Rows that [`CsrMatrix::rows_product`] computes side by side in the solvers' products.
+pub(crate) const ROWS_SIDE_BY_SIDE: usize = 4;
+
 /// Symmetric sparse matrix in compressed rows (diagonal stored separately).
 ///
 /// With `component_diagonal` not empty it is one matrix per vector component m (the viscous
@@ -94,14 +97,33 @@ impl CsrMatrix {
         }
     }
 
-    /// y = A x for M vectors at once (one pass over the matrix), each row gathered by its own
-    /// task in a fixed order: every component gets the bits of a single product.
+    /// y = A x for M vectors at once (one pass over the matrix), each row gathered in a fixed
+    /// order: every component gets the bits of a single product.
     pub fn multiply<const M: usize>(&self, x: &[[f64; M]], y: &mut [[f64; M]]) {
         assert_eq!(x.len(), self.rows());
-        y.par_iter_mut()
-            .with_min_len(MIN_PARALLEL_LEN)
+        y.par_chunks_mut(MIN_PARALLEL_LEN)
             .enumerate()
-            .for_each(|(i, yi)| *yi = self.row_product(i, x));
+            .for_each(|(c, y)| self.products_into(c * MIN_PARALLEL_LEN, x, y));
+    }
+
+    /// Rows first..first + out.len() of A x into `out`, [`ROWS_SIDE_BY_SIDE`] at a time (the
+    /// bits of [`CsrMatrix::row_product`]).
+    #[inline]
+    pub(crate) fn products_into<const M: usize>(
+        &self,
+        first: usize,
+        x: &[[f64; M]],
+        out: &mut [[f64; M]],
+    ) {
+        let mut groups = out.chunks_exact_mut(ROWS_SIDE_BY_SIDE);
+        let mut i = first;
+        for group in &mut groups {
+            group.copy_from_slice(&self.rows_product::<M, ROWS_SIDE_BY_SIDE>(i, x));
+            i += ROWS_SIDE_BY_SIDE;
+        }
+        for (k, o) in groups.into_remainder().iter_mut().enumerate() {
+            *o = self.row_product(i + k, x);
+        }
     }
 
     /// Row i of A x.
@@ -112,6 +134,75 @@ impl CsrMatrix {
         let mut s = self.diagonal[i] * x[i];
         for (&c, &v) in self.columns[range.clone()].iter().zip(&self.values[range]) {
             s += v * x[c as usize];
+        }
+        s
+    }
+
+    /// Rows first..first + R of A x, for M vectors, side by side: each row sums its entries
+    /// in its own order, as [`CsrMatrix::row_product`] does, so the bits are the same. One
+    /// row is a chain of dependent additions that waits on each; R chains overlap.
+    #[inline]
+    pub(crate) fn rows_product<const M: usize, const R: usize>(
+        &self,
+        first: usize,
+        x: &[[f64; M]],
+    ) -> [[f64; M]; R] {
+        if self.component_diagonal.is_empty() {
+            self.rows_product_by::<M, R, false>(first, x)
+        } else {
+            self.rows_product_by::<M, R, true>(first, x)
+        }
+    }
+
+    /// [`CsrMatrix::rows_product`], with or without the components' own signs and diagonals.
+    #[inline(always)]
+    fn rows_product_by<const M: usize, const R: usize, const COMPONENTS: bool>(
+        &self,
+        first: usize,
+        x: &[[f64; M]],
+    ) -> [[f64; M]; R] {
+        let start: [usize; R] = std::array::from_fn(|k| self.row_offsets[first + k]);
+        let end: [usize; R] = std::array::from_fn(|k| self.row_offsets[first + k + 1]);
+        let mut s: [[f64; M]; R] = std::array::from_fn(|k| {
+            let i = first + k;
+            std::array::from_fn(|m| {
+                let d = if COMPONENTS {
+                    self.component_diagonal[i][m]
+                } else {
+                    self.diagonal[i]
+                };
+                d * x[i][m]
+            })
+        });
+        // One entry of row k, as `row_product` adds it.
+        let add = |s: &mut [f64; M], c: u32, v: f64| {
+            if COMPONENTS {
+                let xc = &x[entry_index(c)];
+                for m in 0..M {
+                    s[m] += v * Neighbours::component_sign(c, m) * xc[m];
+                }
+            } else {
+                let xc = &x[c as usize];
+                for m in 0..M {
+                    s[m] += v * xc[m];
+                }
+            }
+        };
+        let common = (0..R).map(|k| end[k] - start[k]).min().unwrap_or(0);
+        let columns: [&[u32]; R] =
+            std::array::from_fn(|k| &self.columns[start[k]..start[k] + common]);
+        let values: [&[f64]; R] =
+            std::array::from_fn(|k| &self.values[start[k]..start[k] + common]);
+        for t in 0..common {
+            for k in 0..R {
+                add(&mut s[k], columns[k][t], values[k][t]);
+            }
+        }
+        for k in 0..R {
+            let range = start[k] + common..end[k];
+            for (&c, &v) in self.columns[range.clone()].iter().zip(&self.values[range]) {
+                add(&mut s[k], c, v);
+            }
         }
         s
     }
@@ -142,5 +233,91 @@ impl CsrMatrix {
             }
         }
         s
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rng::SplitMix64;
+
+    /// A random matrix of `n` rows of 0 to 40 entries (values of mixed signs and magnitudes,
+    /// so that the order of the additions shows in the last bits); with `planes`, columns
+    /// carry random plane bits and each component its own diagonal.
+    fn random_matrix(rng: &mut SplitMix64, n: usize, planes: bool) -> CsrMatrix {
+        type Row = (Vec<u32>, Vec<f64>, f64);
+        let rows: Vec<Row> = (0..n)
+            .map(|_| {
+                let len = (rng.unit() * 41.0) as usize;
+                let (mut columns, mut values) = (Vec::new(), Vec::new());
+                for _ in 0..len {
+                    let bits = if planes {
+                        ((rng.unit() * 8.0) as u32) << 29
+                    } else {
+                        0
+                    };
+                    columns.push((rng.unit() * n as f64) as u32 | bits);
+                    // Magnitudes 1e-6..1e6, so that the order of additions shows in the bits.
+                    let scale = [1e-6, 1e-3, 1.0, 1e3, 1e6][(rng.unit() * 5.0) as usize];
+                    values.push((rng.unit() - 0.5) * scale);
+                }
+                (columns, values, 1.0 + rng.unit())
+            })
+            .collect();
+        let (m, _) = CsrMatrix::assemble(n, |k, columns, values| {
+            columns.extend_from_slice(&rows[k].0);
+            values.extend_from_slice(&rows[k].1);
+            (rows[k].2, ())
+        });
+        if planes {
+            m.with_component_diagonals(|k| [k as f64 * 0.1, -0.3, 0.7])
+        } else {
+            m
+        }
+    }
+
+    #[test]
+    fn rows_side_by_side_give_the_bits_of_one_row_at_a_time() {
+        for planes in [false, true] {
+            let mut rng = SplitMix64::new(7 + u64::from(planes));
+            let n = 203; // not a multiple of the group: the remainder's rows too
+            let a = random_matrix(&mut rng, n, planes);
+            let x: Vec<[f64; 3]> = (0..n)
+                .map(|_| std::array::from_fn(|_| rng.unit() * 2.0 - 1.0))
+                .collect();
+            let one_by_one: Vec<[f64; 3]> = (0..n).map(|i| a.row_product(i, &x)).collect();
+            let mut side_by_side = vec![[0.0; 3]; n];
+            a.multiply(&x, &mut side_by_side);
+            for i in 0..n {
+                for m in 0..3 {
+                    assert_eq!(
+                        side_by_side[i][m].to_bits(),
+                        one_by_one[i][m].to_bits(),
+                        "row {i}, component {m}, planes {planes}"
+                    );
+                }
+            }
+            // Summed in another order, some row differs in its last bits: the check can see
+            // an order changed.
+            let reversed = (0..n).any(|i| {
+                let range = a.row_offsets[i]..a.row_offsets[i + 1];
+                let mut s = a.diagonal_of(i, 0) * x[i][0];
+                for k in range.rev() {
+                    let c = a.columns[k];
+                    s += a.values[k] * Neighbours::component_sign(c, 0) * x[entry_index(c)][0];
+                }
+                s.to_bits() != one_by_one[i][0].to_bits()
+            });
+            assert!(reversed, "no row sensitive to its order");
+            if !planes {
+                let x1: Vec<f64> = x.iter().map(|v| v[0]).collect();
+                let (x1c, _) = x1.as_chunks::<1>();
+                let mut y = vec![[0.0; 1]; n];
+                a.products_into(0, x1c, &mut y);
+                for (i, y) in y.iter().enumerate() {
+                    assert_eq!(y[0].to_bits(), a.row_value(i, &x1).to_bits(), "row {i}");
+                }
+            }
+        }
     }
 }
