@@ -737,13 +737,22 @@ impl<const D: usize> CellGrid<D> {
                 continue;
             }
             let f = self.flat(&c);
-            for &j in &sorted[start[f]..start[f + 1]] {
-                if j as usize != i
-                    && active(j as usize)
-                    && image.displacement(positions, i, j).norm_squared() < cutoff2
-                {
-                    list.push(j);
+            let cell = &sorted[start[f]..start[f + 1]];
+            if wrap {
+                for &j in cell {
+                    if j as usize != i
+                        && active(j as usize)
+                        && image.displacement(positions, i, j).norm_squared() < cutoff2
+                    {
+                        list.push(j);
+                    }
                 }
+            } else {
+                each_within(cell, i, positions, cutoff2, |j| {
+                    if active(j as usize) {
+                        list.push(j);
+                    }
+                });
             }
         }
         list[before..].sort_unstable();
@@ -762,10 +771,44 @@ fn merge_ascending(a: impl Iterator<Item = u32>, b: &[u32], out: &mut Vec<u32>) 
     out.extend(b);
 }
 
+/// Calls `found(j)`, in order, for each j of `candidates` (plain indices, no period) other
+/// than `i` with |x_j - x_i|^2 < `cutoff2`. Eight at a time where the CPU has AVX-512
+/// ([`wide::each_within`], the same calls), else one at a time.
+fn each_within<const D: usize>(
+    candidates: &[u32],
+    i: usize,
+    positions: &[Vector<D>],
+    cutoff2: f64,
+    mut found: impl FnMut(u32),
+) {
+    #[cfg(target_arch = "x86_64")]
+    if wide_available() {
+        // SAFETY: the features were detected just above.
+        return unsafe { wide::each_within(candidates, i, positions, cutoff2, &mut found) };
+    }
+    each_within_scalar(candidates, i, positions, cutoff2, &mut found);
+}
+
+/// [`each_within`] one candidate at a time.
+fn each_within_scalar<const D: usize>(
+    candidates: &[u32],
+    i: usize,
+    positions: &[Vector<D>],
+    cutoff2: f64,
+    found: &mut impl FnMut(u32),
+) {
+    let x_i = positions[i];
+    for &j in candidates {
+        if j as usize != i && (positions[j as usize] - x_i).norm_squared() < cutoff2 {
+            found(j);
+        }
+    }
+}
+
 /// The entries of `row` (plain indices, no images) closer to `x_i` than the two thresholds
 /// on |r|^2 ([`sqrt_threshold`]; coincident points excluded), written in order to the fronts
 /// of `outer` and `inner` (each as long as `row`): their counts. Eight entries at a time
-/// where the CPU has AVX-512 ([`cut_plain_row_avx512`], the same bits), else one at a time.
+/// where the CPU has AVX-512 ([`wide::cut_plain_row`], the same bits), else one at a time.
 fn cut_plain_row<const D: usize>(
     row: &[u32],
     x_i: Vector<D>,
@@ -775,11 +818,9 @@ fn cut_plain_row<const D: usize>(
     inner: &mut [u32],
 ) -> (usize, usize) {
     #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx512f")
-        && std::arch::is_x86_feature_detected!("avx512vl")
-    {
+    if wide_available() {
         // SAFETY: the features were detected just above.
-        return unsafe { cut_plain_row_avx512(row, x_i, positions, thresholds, outer, inner) };
+        return unsafe { wide::cut_plain_row(row, x_i, positions, thresholds, outer, inner) };
     }
     cut_plain_row_scalar(row, x_i, positions, thresholds, (0, 0), outer, inner)
 }
@@ -809,45 +850,41 @@ fn cut_plain_row_scalar<const D: usize>(
     (o, n_in)
 }
 
-/// [`cut_plain_row`] eight entries at a time: the positions gathered component by component,
-/// |r|^2 as nalgebra's `norm_squared` forms it ((r0 r0 + r1 r1) + r2 r2, no fused
-/// multiply-add), so every comparison and so every kept pair is the scalar loop's; the kept
-/// indices are compressed into place in order. The last `row.len() % 8` entries go through
-/// the scalar loop. The cut was a third of a 3D pour's time, bound by one load chain a pair.
-///
-/// # Safety
-/// The CPU must have AVX-512 F and VL.
+/// Whether this CPU runs the eight-wide loops ([`wide`]); detected once by std.
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx512vl")]
-unsafe fn cut_plain_row_avx512<const D: usize>(
-    row: &[u32],
-    x_i: Vector<D>,
-    positions: &[Vector<D>],
-    (outer2, inner2): (f64, f64),
-    outer: &mut [u32],
-    inner: &mut [u32],
-) -> (usize, usize) {
+fn wide_available() -> bool {
+    std::arch::is_x86_feature_detected!("avx512f")
+        && std::arch::is_x86_feature_detected!("avx512vl")
+}
+
+/// Eight neighbour candidates at a time under AVX-512 F and VL, for the two loops that
+/// measure every candidate of a list or a cell: the list cut ([`cut_plain_row`]) and the
+/// cell search ([`each_within`]). Each gives the scalar loop's result bit for bit: |r|^2
+/// is formed as nalgebra's `norm_squared` forms it ((r0 r0 + r1 r1) + r2 r2, no fused
+/// multiply-add), so every comparison is the scalar one. The scalar loops wait on one load
+/// chain (index, then position) per candidate; the cut was a third of a 3D pour.
+#[cfg(target_arch = "x86_64")]
+mod wide {
+    use super::Vector;
     use std::arch::x86_64::*;
-    // A position is D contiguous f64 (nalgebra's array storage), read by its index times D.
-    const { assert!(std::mem::size_of::<Vector<D>>() == D * std::mem::size_of::<f64>()) };
-    assert!(outer.len() >= row.len() && inner.len() >= row.len());
-    // Indices are below MAX_PARTICLES (2^29), so u32 compares and i64 offsets hold them.
-    let count = u32::try_from(positions.len()).unwrap_or(u32::MAX);
-    let base = positions.as_ptr().cast::<f64>();
-    let (mut o, mut n_in) = (0usize, 0usize);
-    let blocks = row.len() / 8;
-    let centre: [__m512d; D] = std::array::from_fn(|c| _mm512_set1_pd(x_i[c]));
-    let limit = _mm256_set1_epi32(count as i32);
-    let (outer2_v, inner2_v, zero) = (
-        _mm512_set1_pd(outer2),
-        _mm512_set1_pd(inner2),
-        _mm512_setzero_pd(),
-    );
-    for b in 0..blocks {
-        // SAFETY: `b * 8 + 8 <= row.len()`.
-        let j = unsafe { _mm256_loadu_si256(row.as_ptr().add(b * 8).cast()) };
-        // The scalar loop's bounds check, for all eight lanes.
-        if _mm256_cmplt_epu32_mask(j, limit) != 0xff {
+
+    /// |x_j - x_i|^2 for the eight indices in `j`, `centre` holding x_i per component.
+    /// Panics, as slice indexing would, when an index is past the positions.
+    ///
+    /// # Safety
+    /// The CPU must have AVX-512 F and VL.
+    #[inline]
+    #[target_feature(enable = "avx512f,avx512vl")]
+    pub(super) unsafe fn squared_distances<const D: usize>(
+        j: __m256i,
+        centre: &[__m512d; D],
+        positions: &[Vector<D>],
+    ) -> __m512d {
+        // A position is D contiguous f64 (nalgebra's array storage), read at index times D.
+        const { assert!(std::mem::size_of::<Vector<D>>() == D * std::mem::size_of::<f64>()) };
+        // Indices are below MAX_PARTICLES (2^29), so u32 compares and i64 offsets hold them.
+        let count = u32::try_from(positions.len()).unwrap_or(u32::MAX);
+        if _mm256_cmplt_epu32_mask(j, _mm256_set1_epi32(count as i32)) != 0xff {
             panic!(
                 "index out of bounds: a neighbour past {} positions",
                 positions.len()
@@ -858,36 +895,118 @@ unsafe fn cut_plain_row_avx512<const D: usize>(
         for _ in 1..D {
             offset = _mm512_add_epi64(offset, j64);
         }
-        let mut d2 = zero;
+        let base = positions.as_ptr().cast::<f64>();
+        let mut d2 = _mm512_setzero_pd();
         for (c, centre_c) in centre.iter().enumerate() {
-            // SAFETY: every index is below `positions.len()` (checked above), so each
-            // offset j D + c lies within the positions' D len() values.
+            // SAFETY: every index is below `positions.len()` (checked above), so each offset
+            // j D + c lies within the positions' D len() values.
             let x = unsafe { _mm512_i64gather_pd::<8>(offset, base.add(c)) };
             let r = _mm512_sub_pd(x, *centre_c);
             let rr = _mm512_mul_pd(r, r);
             d2 = if c == 0 { rr } else { _mm512_add_pd(d2, rr) };
         }
-        let apart = _mm512_cmp_pd_mask::<_CMP_GT_OQ>(d2, zero);
-        let keep_outer = apart & _mm512_cmp_pd_mask::<_CMP_LT_OQ>(d2, outer2_v);
-        let keep_inner = apart & _mm512_cmp_pd_mask::<_CMP_LT_OQ>(d2, inner2_v);
-        // SAFETY: `o` and `n_in` are at most `b * 8`, and each store writes at most eight
-        // values, so within the first `row.len()` of `outer` and `inner`.
-        unsafe {
-            _mm256_mask_compressstoreu_epi32(outer.as_mut_ptr().add(o).cast(), keep_outer, j);
-            _mm256_mask_compressstoreu_epi32(inner.as_mut_ptr().add(n_in).cast(), keep_inner, j);
-        }
-        o += keep_outer.count_ones() as usize;
-        n_in += keep_inner.count_ones() as usize;
+        d2
     }
-    cut_plain_row_scalar(
-        &row[blocks * 8..],
-        x_i,
-        positions,
-        (outer2, inner2),
-        (o, n_in),
-        outer,
-        inner,
-    )
+
+    /// x_i per component, for [`squared_distances`].
+    ///
+    /// # Safety
+    /// The CPU must have AVX-512 F.
+    #[inline]
+    #[target_feature(enable = "avx512f")]
+    pub(super) unsafe fn centre<const D: usize>(x_i: &Vector<D>) -> [__m512d; D] {
+        std::array::from_fn(|c| _mm512_set1_pd(x_i[c]))
+    }
+
+    /// [`super::cut_plain_row`] eight entries at a time, the kept indices compressed into
+    /// place in order; the last `row.len() % 8` through the scalar loop.
+    ///
+    /// # Safety
+    /// The CPU must have AVX-512 F and VL.
+    #[target_feature(enable = "avx512f,avx512vl")]
+    pub(super) unsafe fn cut_plain_row<const D: usize>(
+        row: &[u32],
+        x_i: Vector<D>,
+        positions: &[Vector<D>],
+        (outer2, inner2): (f64, f64),
+        outer: &mut [u32],
+        inner: &mut [u32],
+    ) -> (usize, usize) {
+        assert!(outer.len() >= row.len() && inner.len() >= row.len());
+        let (mut o, mut n_in) = (0usize, 0usize);
+        let blocks = row.len() / 8;
+        // SAFETY (both calls): the caller's CPU has the features.
+        let centre = unsafe { centre(&x_i) };
+        let (outer2_v, inner2_v, zero) = (
+            _mm512_set1_pd(outer2),
+            _mm512_set1_pd(inner2),
+            _mm512_setzero_pd(),
+        );
+        for b in 0..blocks {
+            // SAFETY: `b * 8 + 8 <= row.len()`.
+            let j = unsafe { _mm256_loadu_si256(row.as_ptr().add(b * 8).cast()) };
+            let d2 = unsafe { squared_distances(j, &centre, positions) };
+            let apart = _mm512_cmp_pd_mask::<_CMP_GT_OQ>(d2, zero);
+            let keep_outer = apart & _mm512_cmp_pd_mask::<_CMP_LT_OQ>(d2, outer2_v);
+            let keep_inner = apart & _mm512_cmp_pd_mask::<_CMP_LT_OQ>(d2, inner2_v);
+            // SAFETY: `o` and `n_in` are at most `b * 8`, and each store writes at most eight
+            // values, so within the first `row.len()` of `outer` and `inner`.
+            unsafe {
+                _mm256_mask_compressstoreu_epi32(outer.as_mut_ptr().add(o).cast(), keep_outer, j);
+                _mm256_mask_compressstoreu_epi32(
+                    inner.as_mut_ptr().add(n_in).cast(),
+                    keep_inner,
+                    j,
+                );
+            }
+            o += keep_outer.count_ones() as usize;
+            n_in += keep_inner.count_ones() as usize;
+        }
+        super::cut_plain_row_scalar(
+            &row[blocks * 8..],
+            x_i,
+            positions,
+            (outer2, inner2),
+            (o, n_in),
+            outer,
+            inner,
+        )
+    }
+
+    /// [`super::each_within`] eight candidates at a time; the last `candidates.len() % 8`
+    /// through the scalar loop.
+    ///
+    /// # Safety
+    /// The CPU must have AVX-512 F and VL.
+    #[target_feature(enable = "avx512f,avx512vl")]
+    pub(super) unsafe fn each_within<const D: usize>(
+        candidates: &[u32],
+        i: usize,
+        positions: &[Vector<D>],
+        cutoff2: f64,
+        found: &mut impl FnMut(u32),
+    ) {
+        let blocks = candidates.len() / 8;
+        // SAFETY (both calls): the caller's CPU has the features.
+        let centre = unsafe { centre(&positions[i]) };
+        let (cutoff2_v, own) = (_mm512_set1_pd(cutoff2), _mm256_set1_epi32(i as i32));
+        let mut kept = [0u32; 8];
+        for b in 0..blocks {
+            // SAFETY: `b * 8 + 8 <= candidates.len()`.
+            let j = unsafe { _mm256_loadu_si256(candidates.as_ptr().add(b * 8).cast()) };
+            let d2 = unsafe { squared_distances(j, &centre, positions) };
+            let keep =
+                _mm512_cmp_pd_mask::<_CMP_LT_OQ>(d2, cutoff2_v) & _mm256_cmpneq_epu32_mask(j, own);
+            if keep != 0 {
+                // SAFETY: at most eight values into eight.
+                unsafe { _mm256_mask_compressstoreu_epi32(kept.as_mut_ptr().cast(), keep, j) };
+                kept[..keep.count_ones() as usize]
+                    .iter()
+                    .for_each(|&j| found(j));
+            }
+        }
+        super::each_within_scalar(&candidates[blocks * 8..], i, positions, cutoff2, found);
+    }
 }
 
 /// Which pairs of a particle's list [`Neighbours::within_two_by`] keeps.
@@ -1229,6 +1348,43 @@ mod tests {
             assert_eq!((o, m), (o_s, m_s), "{D}D row of {len}");
             assert_eq!(wide.0[..o], plain.0[..o], "{D}D row of {len}");
             assert_eq!(wide.1[..m], plain.1[..m], "{D}D row of {len}");
+        }
+    }
+
+    /// The cell search's candidates by [`each_within`] and by the scalar loop: the same
+    /// calls in the same order, the own index left out, a cutoff tied to a pair's |r|^2.
+    fn check_wide_search_equals_scalar<const D: usize>(seed: u64) {
+        let mut rng = crate::rng::SplitMix64::new(seed);
+        let n = 300;
+        let mut positions: Vec<Vector<D>> = (0..n)
+            .map(|_| Vector::<D>::from_fn(|_, _| 0.1 * rng.unit()))
+            .collect();
+        for k in (0..n).step_by(29) {
+            positions[k] = positions[1];
+        }
+        for len in 0..=40 {
+            let i = (rng.unit() * n as f64) as usize;
+            // Cell order is not index order: candidates unsorted, the own index among them.
+            let mut cell: Vec<u32> = (0..len).map(|_| (rng.unit() * n as f64) as u32).collect();
+            if len > 3 {
+                cell[len / 2] = i as u32;
+            }
+            let cutoff2 = cell.get(len / 3).map_or(1.0, |&j| {
+                (positions[j as usize] - positions[i]).norm_squared()
+            });
+            let (mut wide, mut plain) = (Vec::new(), Vec::new());
+            each_within(&cell, i, &positions, cutoff2, |j| wide.push(j));
+            each_within_scalar(&cell, i, &positions, cutoff2, &mut |j| plain.push(j));
+            assert_eq!(wide, plain, "{D}D cell of {len}");
+            assert!(!plain.contains(&(i as u32)));
+        }
+    }
+
+    #[test]
+    fn the_wide_cell_search_finds_the_scalar_loops_neighbours() {
+        for seed in 1..6 {
+            check_wide_search_equals_scalar::<2>(seed);
+            check_wide_search_equals_scalar::<3>(seed);
         }
     }
 
