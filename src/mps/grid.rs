@@ -1301,6 +1301,21 @@ mod tests {
         }
     }
 
+    /// `n` points in a 0.1 m box, every `every`-th one on point 0 (coincident pairs).
+    fn points_with_twins<const D: usize>(
+        rng: &mut crate::rng::SplitMix64,
+        n: usize,
+        every: usize,
+    ) -> Vec<Vector<D>> {
+        let mut positions: Vec<Vector<D>> = (0..n)
+            .map(|_| Vector::<D>::from_fn(|_, _| 0.1 * rng.unit()))
+            .collect();
+        for k in (0..n).step_by(every) {
+            positions[k] = positions[0];
+        }
+        positions
+    }
+
     /// One row's cut by [`cut_plain_row`] (eight at a time where the CPU has AVX-512) and by
     /// the scalar loop: the same counts and the same kept entries, in order, on rows of every
     /// length from 0 to 40 (whole blocks and tails), with coincident points and with each
@@ -1308,12 +1323,7 @@ mod tests {
     fn check_wide_cut_equals_scalar<const D: usize>(seed: u64) {
         let mut rng = crate::rng::SplitMix64::new(seed);
         let n = 400;
-        let mut positions: Vec<Vector<D>> = (0..n)
-            .map(|_| Vector::<D>::from_fn(|_, _| 0.1 * rng.unit()))
-            .collect();
-        for k in (0..n).step_by(37) {
-            positions[k] = positions[0];
-        }
+        let positions = points_with_twins::<D>(&mut rng, n, 37);
         for len in 0..=40 {
             let i = (rng.unit() * n as f64) as usize;
             let mut row: Vec<u32> = (0..len).map(|_| (rng.unit() * n as f64) as u32).collect();
@@ -1356,12 +1366,7 @@ mod tests {
     fn check_wide_search_equals_scalar<const D: usize>(seed: u64) {
         let mut rng = crate::rng::SplitMix64::new(seed);
         let n = 300;
-        let mut positions: Vec<Vector<D>> = (0..n)
-            .map(|_| Vector::<D>::from_fn(|_, _| 0.1 * rng.unit()))
-            .collect();
-        for k in (0..n).step_by(29) {
-            positions[k] = positions[1];
-        }
+        let positions = points_with_twins::<D>(&mut rng, n, 29);
         for len in 0..=40 {
             let i = (rng.unit() * n as f64) as usize;
             // Cell order is not index order: candidates unsorted, the own index among them.
