@@ -231,21 +231,13 @@ impl Coarse {
 fn residual_of(a: &CsrMatrix, z: &[f64], r: &[f64], residual: &mut [f64]) {
     // A z by rows side by side (the bits of `row_value`), then r - A z.
     let (z, _) = z.as_chunks::<1>();
-    let rows = |first: usize, out: &mut [f64]| {
+    for_row_blocks(residual, |first, out| {
         let (az, _) = out.as_chunks_mut::<1>();
         a.products_into(first, z, az);
         for (k, o) in out.iter_mut().enumerate() {
             *o = r[first + k] - *o;
         }
-    };
-    if residual.len() < PARALLEL_ROWS {
-        rows(0, residual);
-    } else {
-        residual
-            .par_chunks_mut(ROWS_PER_TASK)
-            .enumerate()
-            .for_each(|(c, chunk)| rows(c * ROWS_PER_TASK, chunk));
-    }
+    });
 }
 
 /// Rows below which a level's loops run on the calling thread: handing work to threads costs
@@ -255,16 +247,22 @@ const ROWS_PER_TASK: usize = 1024;
 
 /// out[i] = f(i, out[i]) for every row, in parallel on large levels.
 fn for_rows(out: &mut [f64], f: impl Fn(usize, &mut f64) + Sync) {
+    for_row_blocks(out, |first, block| {
+        for (k, o) in block.iter_mut().enumerate() {
+            f(first + k, o);
+        }
+    });
+}
+
+/// f(first, rows first..first + len) over consecutive blocks of `out`: one block on small
+/// levels, blocks of ROWS_PER_TASK in parallel on large ones.
+fn for_row_blocks(out: &mut [f64], f: impl Fn(usize, &mut [f64]) + Sync) {
     if out.len() < PARALLEL_ROWS {
-        out.iter_mut().enumerate().for_each(|(i, o)| f(i, o));
+        f(0, out);
     } else {
         out.par_chunks_mut(ROWS_PER_TASK)
             .enumerate()
-            .for_each(|(c, chunk)| {
-                for (k, o) in chunk.iter_mut().enumerate() {
-                    f(c * ROWS_PER_TASK + k, o);
-                }
-            });
+            .for_each(|(c, block)| f(c * ROWS_PER_TASK, block));
     }
 }
 
