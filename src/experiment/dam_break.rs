@@ -3,8 +3,8 @@
 use super::geometry::container::add_walls;
 use super::geometry::lattice::{cells, centre, for_each_index};
 use super::{Experiment, Manifest, Scene};
-use crate::manifest::validate::{Checker, POSITIVE, fmt_num};
-use crate::mps::{ParticleKind, Particles, Vector};
+use crate::manifest::validate::{Checker, NON_NEGATIVE, POSITIVE, fmt_num};
+use crate::mps::{ParticleKind, Particles, Path, RigidBody, Vector};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
@@ -24,6 +24,10 @@ pub struct DamBreak {
     pub column_width_m: f64,
     /// Height of the fluid column, in metres.
     pub column_height_m: f64,
+    /// Navier slip length of the tank's side walls (y = 0 and y = depth; 3D only), in
+    /// metres: large, free slip, so that a 3D tank one slice deep stands for the 2D case.
+    /// null: no slip, as every wall.
+    pub side_slip_length_m: Option<f64>,
 }
 
 impl Default for DamBreak {
@@ -34,6 +38,7 @@ impl Default for DamBreak {
             tank_depth_m: 0.1,
             column_width_m: 0.25,
             column_height_m: 0.5,
+            side_slip_length_m: None,
         }
     }
 }
@@ -80,6 +85,17 @@ pub fn check_tank(p: &DamBreak, m: &Manifest, c: &mut Checker) {
     let mut all_ok = true;
     for (field, x) in dims {
         all_ok &= c.real(field, x, POSITIVE);
+    }
+    match (m.dimension, p.side_slip_length_m) {
+        (3, Some(b)) => all_ok &= c.real("scene.side_slip_length_m", b, NON_NEGATIVE),
+        (_, Some(_)) => {
+            c.fail(
+                "scene.side_slip_length_m",
+                "is for dimension 3 only (a 2D tank has no side walls)".to_string(),
+            );
+            all_ok = false;
+        }
+        _ => {}
     }
     if !all_ok {
         return;
@@ -168,12 +184,37 @@ pub fn build<const D: usize>(
         wall_layers,
         dummy_layers,
     );
+    let mut bodies = Vec::new();
+    if let (3, Some(slip_length_m)) = (D, p.side_slip_length_m) {
+        // The side walls (every wall or dummy outside the tank's depth) move to the end, in
+        // their order, as one body at rest whose surface the viscous terms let slip
+        // (`mps::viscosity::SlipWall`).
+        let depth_m = tank[1] as f64 * spacing_m;
+        let side = |i: usize| {
+            let y = particles.position_m[i][1];
+            particles.kind[i] != ParticleKind::Fluid && !(0.0..depth_m).contains(&y)
+        };
+        let mut sorted = Particles::<D>::default();
+        for beside in [false, true] {
+            for i in (0..particles.len()).filter(|&i| side(i) == beside) {
+                sorted.push(particles.position_m[i], particles.kind[i]);
+            }
+        }
+        let first = (0..particles.len()).filter(|&i| !side(i)).count();
+        bodies.push(RigidBody {
+            first,
+            end: sorted.len(),
+            path: Path::lift(0.0, Vector::<D>::zeros(), Vector::<D>::zeros()),
+            slip_length_m: Some(slip_length_m),
+        });
+        particles = sorted;
+    }
     let (domain_min_m, domain_max_m) = domain::<D>(p, spacing_m);
     Scene {
         particles,
         domain_min_m,
         domain_max_m,
-        bodies: Vec::new(),
+        bodies,
         inlets: Vec::new(),
         gravity_tilt_rad: 0.0,
         periodic_x: None,

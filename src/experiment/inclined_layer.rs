@@ -5,12 +5,14 @@
 //! layer stays rigid when h <= h_c = tau_0 / (rho g sin theta); above, it shears in a bottom
 //! zone of thickness h - h_c under a plug moving at U = rho g sin(theta) (h - h_c)^2 / (2 mu_p)
 //! (a Newtonian film, tau_0 = 0: the Nusselt surface speed rho g sin(theta) h^2 / (2 mu)).
-//! 2D only: the neighbour grid has one periodic axis.
+//! In 3D the layer is a channel of width `width_m` between no-slip side walls (the neighbour
+//! grid has one periodic axis), and the plug speed is taken over the middle third of the width,
+//! where the side walls' drag has decayed for a layer much shallower than the channel is wide.
 use super::geometry::lattice::{cells, centre, for_each_index};
-use super::{Experiment, Manifest, Scene, require_2d, yield_stress_pa};
-use crate::manifest::validate::{Checker, POSITIVE, between, fmt_num};
+use super::{Experiment, Manifest, Scene, yield_stress_pa};
+use crate::manifest::validate::{Checker, NON_NEGATIVE, POSITIVE, between, fmt_num};
 use crate::manifest::Fluid;
-use crate::mps::{ParticleKind, Particles, PeriodicX, Vector};
+use crate::mps::{ParticleKind, Particles, Path, PeriodicX, RigidBody, Vector};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
@@ -29,6 +31,11 @@ pub struct InclinedLayer {
     pub period_m: f64,
     /// Inclination theta of the plane, in degrees.
     pub incline_deg: f64,
+    /// Width of the channel between the side walls, in metres: 3D only (and required there).
+    pub width_m: Option<f64>,
+    /// Navier slip length of the side walls, in metres (3D; large: free slip, so that the
+    /// channel stands for a layer of unbounded width). Absent: no slip.
+    pub side_slip_length_m: Option<f64>,
 }
 
 impl Default for InclinedLayer {
@@ -37,6 +44,8 @@ impl Default for InclinedLayer {
             layer_depth_m: 0.04,
             period_m: 0.2,
             incline_deg: 5.0,
+            width_m: None,
+            side_slip_length_m: None,
         }
     }
 }
@@ -48,6 +57,10 @@ impl InclinedLayer {
     /// h on the lattice (whole rows).
     fn depth_m(&self, spacing_m: f64) -> f64 {
         cells(self.layer_depth_m, spacing_m) as f64 * spacing_m
+    }
+    /// The channel's width on the lattice (3D).
+    fn width(&self, spacing_m: f64) -> f64 {
+        cells(self.width_m.unwrap_or(0.0), spacing_m) as f64 * spacing_m
     }
     fn period(&self, spacing_m: f64) -> PeriodicX {
         PeriodicX {
@@ -82,7 +95,35 @@ fn closed_form(layer: &InclinedLayer, m: &Manifest) -> (f64, f64, f64) {
 
 impl Experiment for InclinedLayer {
     fn check(&self, m: &Manifest, c: &mut Checker) {
-        require_2d(m, c, "inclined_layer", "its periodic axis is the only one the grid has");
+        let width_ok = match (m.dimension, self.width_m) {
+            (3, None) => {
+                c.fail(
+                    "scene.width_m",
+                    "required in 3D: the width of the channel between the side walls (the neighbour grid has one periodic axis)".into(),
+                );
+                false
+            }
+            (3, Some(w)) => c.real("scene.width_m", w, POSITIVE),
+            (_, Some(_)) => {
+                c.fail(
+                    "scene.width_m",
+                    "is for dimension 3 only (a 2D layer has no width)".into(),
+                );
+                false
+            }
+            _ => true,
+        };
+        let slip_ok = match (m.dimension, self.side_slip_length_m) {
+            (3, Some(b)) => c.real("scene.side_slip_length_m", b, NON_NEGATIVE),
+            (_, Some(_)) => {
+                c.fail(
+                    "scene.side_slip_length_m",
+                    "is for dimension 3 only (a 2D layer has no side walls)".into(),
+                );
+                false
+            }
+            _ => true,
+        };
         let depth_ok = c.real("scene.layer_depth_m", self.layer_depth_m, POSITIVE);
         let period_ok = c.real("scene.period_m", self.period_m, POSITIVE);
         c.real(
@@ -90,16 +131,15 @@ impl Experiment for InclinedLayer {
             self.incline_deg,
             between(0.0, false, 90.0, false),
         );
-        if !(depth_ok && period_ok && super::spacing_ok(m)) {
+        if !(depth_ok && period_ok && width_ok && slip_ok && super::spacing_ok(m)) {
             return;
         }
-        c.lattice_lengths(
-            &[
-                ("scene.layer_depth_m", self.layer_depth_m),
-                ("scene.period_m", self.period_m),
-            ],
-            m.spacing_m,
-        );
+        let mut lengths = vec![
+            ("scene.layer_depth_m", self.layer_depth_m),
+            ("scene.period_m", self.period_m),
+        ];
+        lengths.extend(self.width_m.map(|w| ("scene.width_m", w)));
+        c.lattice_lengths(&lengths, m.spacing_m);
         let shortest = PeriodicX::min_period_m(m.mps.laplacian_radius * m.spacing_m, m.spacing_m);
         if self.period(m.spacing_m).period_m < shortest {
             c.fail(
@@ -117,31 +157,77 @@ impl Experiment for InclinedLayer {
         let columns = cells(self.period_m, l0);
         let rows = cells(self.layer_depth_m, l0);
         let layers = i64::from(m.mps.wall_layers + m.mps.dummy_layers);
+        // 3D: the channel's width in cells (1 in 2D, where axis 1 is the vertical).
+        let width = if D == 3 {
+            cells(self.width_m.unwrap_or(0.0), l0)
+        } else {
+            1
+        };
+        let walls = i64::from(m.mps.wall_layers);
         let mut particles = Particles::<D>::default();
         let mut lo = [0i64; D];
         let mut hi = [1i64; D];
         hi[0] = columns;
+        if D == 3 {
+            hi[1] = width;
+        }
         hi[D - 1] = rows;
         for_each_index(lo, hi, |idx| {
             particles.push(centre(idx, l0), ParticleKind::Fluid)
         });
-        // The floor: wall rows on top, dummies below, across the whole period.
+        // The floor: wall rows on top, dummies below, across the whole period (and in 3D
+        // under the side walls too).
+        if D == 3 {
+            lo[1] = -layers;
+            hi[1] = width + layers;
+        }
         lo[D - 1] = -layers;
         hi[D - 1] = 0;
         for_each_index(lo, hi, |idx| {
-            let kind = if idx[D - 1] >= -i64::from(m.mps.wall_layers) {
+            let kind = if idx[D - 1] >= -walls {
                 ParticleKind::Wall
             } else {
                 ParticleKind::Dummy
             };
             particles.push(centre(idx, l0), kind)
         });
+        let mut bodies = Vec::new();
+        if D == 3 {
+            let first = particles.len();
+            // The side walls: wall rows next to the fluid, dummies behind, from the floor to
+            // three rows above the layer, over the whole period.
+            for (from, to) in [(-layers, 0), (width, width + layers)] {
+                lo[1] = from;
+                hi[1] = to;
+                lo[D - 1] = 0;
+                hi[D - 1] = rows + 3;
+                for_each_index(lo, hi, |idx| {
+                    let behind = if idx[1] < 0 { -idx[1] } else { idx[1] - width + 1 };
+                    let kind = if behind <= walls {
+                        ParticleKind::Wall
+                    } else {
+                        ParticleKind::Dummy
+                    };
+                    particles.push(centre(idx, l0), kind)
+                });
+            }
+            // With a slip length the side walls are a body at rest, whose surface the viscous
+            // terms treat as slipping (`mps::viscosity::SlipWall`).
+            if let Some(slip_length_m) = self.side_slip_length_m {
+                bodies.push(RigidBody {
+                    first,
+                    end: particles.len(),
+                    path: Path::lift(0.0, Vector::<D>::zeros(), Vector::<D>::zeros()),
+                    slip_length_m: Some(slip_length_m),
+                });
+            }
+        }
         let (domain_min_m, domain_max_m) = self.domain::<D>(m);
         Scene {
             particles,
             domain_min_m,
             domain_max_m,
-            bodies: Vec::new(),
+            bodies,
             inlets: Vec::new(),
             gravity_tilt_rad: self.incline_rad(),
             periodic_x: Some(self.period(l0)),
@@ -158,6 +244,10 @@ impl Experiment for InclinedLayer {
         // x never leaves the period; a layer that lifts off by more than its depth has failed.
         lo[0] = -period;
         hi[0] = 2.0 * period;
+        if D == 3 {
+            lo[1] = -floor;
+            hi[1] = self.width(l0) + floor;
+        }
         lo[D - 1] = -floor;
         hi[D - 1] = 2.0 * depth + floor;
         (lo, hi)
@@ -180,6 +270,9 @@ impl Experiment for InclinedLayer {
     ) {
         let depth_m = self.depth_m(m.spacing_m);
         let (_, critical_m, plug_m_s) = closed_form(self, m);
+        let width_m = self.width(m.spacing_m);
+        // 3D: only the middle third of the channel, away from the side walls.
+        let in_middle = |x: &Vector<D>| D != 3 || (x[1] >= width_m / 3.0 && x[1] <= 2.0 * width_m / 3.0);
         let (mut sum, mut count, mut fastest) = (0.0, 0usize, 0.0f64);
         for i in 0..particles.len() {
             if particles.kind[i] != ParticleKind::Fluid {
@@ -187,7 +280,8 @@ impl Experiment for InclinedLayer {
             }
             let v = particles.velocity_m_s[i];
             fastest = fastest.max(v.norm_squared());
-            if particles.position_m[i][D - 1] >= (1.0 - PLUG_SHARE) * depth_m {
+            let x = &particles.position_m[i];
+            if x[D - 1] >= (1.0 - PLUG_SHARE) * depth_m && in_middle(x) {
                 sum += v[0];
                 count += 1;
             }

@@ -617,19 +617,6 @@ pub fn refuse_planes_without_images(m: &Manifest, c: &mut Checker, field: &str, 
     }
 }
 
-/// Fails `dimension` unless the manifest is 2D: `kind` names the test, `why` says why.
-pub fn require_2d(m: &Manifest, c: &mut Checker, kind: &str, why: &str) {
-    if m.dimension != 2 {
-        c.fail(
-            "dimension",
-            format!(
-                "scene.kind {kind} is a 2D test ({why}): dimension must be 2, got {}",
-                m.dimension
-            ),
-        );
-    }
-}
-
 /// Whether the manifest's spacing passed its own check (scene checks that compare lengths
 /// with it skip otherwise).
 pub fn spacing_ok(m: &Manifest) -> bool {

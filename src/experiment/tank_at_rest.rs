@@ -56,6 +56,7 @@ impl TankAtRest {
             tank_depth_m: self.tank_depth_m,
             column_width_m: self.tank_width_m,
             column_height_m: self.fill_height_m,
+            side_slip_length_m: None,
         }
     }
 

@@ -17,7 +17,7 @@
 //! and `mps.exact_projection` (also under the standard scheme) false, `stop.rest_*` without
 //! `stop.rest_metric`, null `mps.wall_collision_*`, `mps.strain_rate_radius`,
 //! `mps.viscous_laplacian_radius`, `time.dt_min_s`, `time.acoustic_courant`, `stop.max_ghost_particles` and the rod's,
-//! the cone's and the bodies' slip lengths, an empty `boundaries` section), so every
+//! the cone's and the bodies' slip lengths, the inclined layer's width and the side walls' slip length (inclined layer, tank), an empty `boundaries` section), so every
 //! experiment keeps the hash it had before they existed and files written then still verify. JSON is YAML, so the canonical text loads back through
 //! [`super::from_str`] to the same manifest and hash.
 
@@ -156,6 +156,8 @@ pub fn canonical_text<S: SceneSection>(manifest: &Manifest<S>) -> String {
         ("stop", "max_ghost_particles"),
         ("scene", "rod_slip_length_m"),
         ("scene", "cone_slip_length_m"),
+        ("scene", "width_m"),
+        ("scene", "side_slip_length_m"),
     ] {
         // null = the rule that held before these fields existed.
         if let Some(map) = value.get_mut(section).and_then(Value::as_object_mut)

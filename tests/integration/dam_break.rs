@@ -242,3 +242,75 @@ fn relative_slope_error(points: &[(f64, f64)]) -> f64 {
         .sum();
     (residuals / (n - 2.0) / sxx).sqrt() / b
 }
+
+/// `scene.side_slip_length_m` (3D): the tank's side walls (every wall and dummy particle
+/// outside the depth) become one body at rest whose surface slips, the same particles as the
+/// no-slip tank, moved to the end in their order; without it the tank is built as before.
+/// In 2D, or negative, it is refused naming the field.
+#[test]
+fn a_3d_tank_with_slipping_side_walls_holds_the_same_particles_with_the_sides_as_one_body() {
+    use mps_runner::experiment::build_scene;
+    use mps_runner::mps::ParticleKind;
+    let base = [
+        "dimension=3",
+        "spacing_m=0.02",
+        "scene.tank_width_m=0.4",
+        "scene.tank_height_m=0.2",
+        "scene.tank_depth_m=0.06",
+        "scene.column_width_m=0.1",
+        "scene.column_height_m=0.1",
+    ];
+    let plain = build_scene::<3>(&common::resolve("dam_break_2d.yaml", &base).manifest);
+    let mut sets = base.to_vec();
+    sets.push("scene.side_slip_length_m=1000");
+    let slip = build_scene::<3>(&common::resolve("dam_break_2d.yaml", &sets).manifest);
+    assert!(plain.bodies.is_empty());
+    assert_eq!(slip.bodies.len(), 1);
+    let body = &slip.bodies[0];
+    assert_eq!(body.slip_length_m, Some(1000.0));
+    assert_eq!(body.end, slip.particles.len());
+    let p = &slip.particles;
+    let beside = |i: usize| !(0.0..0.06).contains(&p.position_m[i][1]);
+    for i in 0..p.len() {
+        let in_body = (body.first..body.end).contains(&i);
+        assert_eq!(
+            in_body,
+            p.kind[i] != ParticleKind::Fluid && beside(i),
+            "particle {i}"
+        );
+    }
+    // Walls on both sides, every one of them a wall or dummy, down to the floor's dummies.
+    assert!((body.first..body.end).any(|i| p.position_m[i][1] < 0.0));
+    assert!((body.first..body.end).any(|i| p.position_m[i][1] > 0.06));
+    let key = |s: &mps_runner::experiment::Scene<3>| {
+        let mut k: Vec<(Vec<u64>, ParticleKind)> = (0..s.particles.len())
+            .map(|i| {
+                let x = s.particles.position_m[i];
+                (x.iter().map(|v| v.to_bits()).collect(), s.particles.kind[i])
+            })
+            .collect();
+        k.sort_by(|a, b| a.0.cmp(&b.0));
+        k
+    };
+    assert_eq!(key(&plain), key(&slip));
+    for (sets, field) in [
+        (
+            vec!["scene.side_slip_length_m=1000"],
+            "scene.side_slip_length_m: is for dimension 3 only",
+        ),
+        (
+            vec![
+                "dimension=3",
+                "scene.tank_depth_m=0.1",
+                "scene.side_slip_length_m=-1",
+            ],
+            "scene.side_slip_length_m: must be >= 0",
+        ),
+    ] {
+        let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
+        let error = mps_runner::experiment::load(&common::experiment("dam_break_2d.yaml"), &sets)
+            .expect_err(field)
+            .to_string();
+        assert!(error.contains(field), "{sets:?}: {error}");
+    }
+}

@@ -254,11 +254,24 @@ fn no_slip_at_the_wall_surface_gives_the_half_poiseuille_speed_of_the_nominal_de
 }
 
 #[test]
-fn a_3d_layer_or_a_short_period_is_refused_naming_the_field() {
+fn a_3d_layer_without_a_width_a_2d_width_or_a_short_period_is_refused_naming_the_field() {
     for (sets, field) in [
+        (vec!["dimension=3"], "scene.width_m: required in 3D"),
         (
-            vec!["dimension=3"],
-            "dimension: scene.kind inclined_layer is a 2D test",
+            vec!["scene.width_m=0.12"],
+            "scene.width_m: is for dimension 3 only",
+        ),
+        (
+            vec!["scene.side_slip_length_m=1"],
+            "scene.side_slip_length_m: is for dimension 3 only",
+        ),
+        (
+            vec![
+                "dimension=3",
+                "scene.width_m=0.12",
+                "scene.side_slip_length_m=-1",
+            ],
+            "scene.side_slip_length_m: must be >= 0",
         ),
         (
             vec!["spacing_m=0.01", "scene.period_m=0.1"],
@@ -275,4 +288,50 @@ fn a_3d_layer_or_a_short_period_is_refused_naming_the_field() {
             .to_string();
         assert!(error.contains(field), "{sets:?}: {error}");
     }
+}
+
+/// The layer in 3D: a channel of width W between side walls that slip freely
+/// (`scene.side_slip_length_m`), so that it stands for a layer of unbounded width, under the
+/// quiet preset (the yield solve). 10 mm, 42.4 Pa (the L-box's yield stress), mu_p 20 Pa s,
+/// h_c = 21.6 mm: at h = 20 mm (0.93 h_c) the layer holds (measured 1e-8 m/s, every particle
+/// non-flowing, over 2 s); at h = 40 mm (1.85 h_c, a sheared zone of 1.8 spacings) the plug
+/// moves at the closed form U (measured 1.00-1.02 U over [0.25, 1.5] s, W = 0.2 m). With
+/// no-slip side walls the same layer runs at 0.39 U: the channel's walls hold the plug, which
+/// spans the width (docs/validation.md, "A 3D layer on an incline").
+#[test]
+fn a_3d_layer_between_slipping_side_walls_holds_below_h_c_and_slides_at_u_above() {
+    let run = |sets: &[&str]| {
+        let mut all = vec![
+            "dimension=3",
+            "spacing_m=0.01",
+            "scene.period_m=0.12",
+            "scene.width_m=0.12",
+            "scene.side_slip_length_m=1000",
+            "fluid.yield_stress_pa=42.4",
+            "fluid.plastic_viscosity_pa_s=20",
+            "mps.preset=quiet",
+            "time.end_s=1",
+        ];
+        all.extend_from_slice(sets);
+        let resolved = common::resolve("inclined_layer.yaml", &all);
+        assert_eq!(resolved.manifest.mps.yield_penalty_pa_s, 1000.0);
+        let dir = tempfile::tempdir().unwrap();
+        (common::run_completed(&resolved, dir.path(), 2), dir)
+    };
+    let (rigid, _dir) = run(&["scene.layer_depth_m=0.02"]);
+    let speed = rigid.summary.metrics["fluid_max_speed_m_s"];
+    assert!(speed < 1e-4, "max speed {speed} m/s at 0.93 h_c");
+    assert_eq!(rigid.summary.metrics["non_flowing_fraction"], 1.0);
+    let (sliding, _dir) = run(&["scene.layer_depth_m=0.04"]);
+    let closed = sliding.summary.metrics["closed_form_plug_speed_m_s"];
+    let h_c = 42.4 / driving_pa_m();
+    let expected = driving_pa_m() * (0.04 - h_c) * (0.04 - h_c) / (2.0 * 20.0);
+    assert!((closed / expected - 1.0).abs() < 1e-12);
+    let rows = plug_speeds_after(&sliding.path, 0.25);
+    assert!(rows.len() >= 70, "{} rows after 0.25 s", rows.len());
+    let mean = rows.iter().sum::<f64>() / rows.len() as f64;
+    assert!(
+        (mean / closed - 1.0).abs() < 0.05,
+        "mean plug {mean} m/s, closed form {closed} m/s"
+    );
 }

@@ -161,7 +161,8 @@ fn full_manifest_parses_and_defaults_are_filled() {
             tank_height_m: 0.6,
             tank_depth_m: 0.1,
             column_width_m: 0.25,
-            column_height_m: 0.5
+            column_height_m: 0.5,
+            side_slip_length_m: None,
         })
     );
     assert_eq!(d.output.checkpoint_interval_s, 0.1);

@@ -707,6 +707,7 @@ fn dam_break_tanks<const D: usize>() {
             tank_depth_m: d,
             column_width_m: cw,
             column_height_m: ch,
+            side_slip_length_m: None,
         };
         for (walls, dummies) in [(1, 2), (2, 1), (1, 3), (3, 0)] {
             // The tank interior exactly as dam_break::build computes it.
