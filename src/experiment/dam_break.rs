@@ -4,7 +4,7 @@ use super::geometry::container::add_walls;
 use super::geometry::lattice::{cells, centre, for_each_index};
 use super::{Experiment, Manifest, Scene};
 use crate::manifest::validate::{Checker, NON_NEGATIVE, POSITIVE, fmt_num};
-use crate::mps::{ParticleKind, Particles, Path, RigidBody, Vector};
+use crate::mps::{ParticleKind, Particles, Vector};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
@@ -86,17 +86,14 @@ pub fn check_tank(p: &DamBreak, m: &Manifest, c: &mut Checker) {
     for (field, x) in dims {
         all_ok &= c.real(field, x, POSITIVE);
     }
-    match (m.dimension, p.side_slip_length_m) {
-        (3, Some(b)) => all_ok &= c.real("scene.side_slip_length_m", b, NON_NEGATIVE),
-        (_, Some(_)) => {
-            c.fail(
-                "scene.side_slip_length_m",
-                "is for dimension 3 only (a 2D tank has no side walls)".to_string(),
-            );
-            all_ok = false;
-        }
-        _ => {}
-    }
+    all_ok &= super::check_3d_only(
+        m,
+        c,
+        "scene.side_slip_length_m",
+        p.side_slip_length_m,
+        NON_NEGATIVE,
+        "a 2D tank has no side walls",
+    );
     if !all_ok {
         return;
     }
@@ -201,12 +198,7 @@ pub fn build<const D: usize>(
             }
         }
         let first = (0..particles.len()).filter(|&i| !side(i)).count();
-        bodies.push(RigidBody {
-            first,
-            end: sorted.len(),
-            path: Path::lift(0.0, Vector::<D>::zeros(), Vector::<D>::zeros()),
-            slip_length_m: Some(slip_length_m),
-        });
+        bodies.push(super::slipping_walls(first, sorted.len(), slip_length_m));
         particles = sorted;
     }
     let (domain_min_m, domain_max_m) = domain::<D>(p, spacing_m);

@@ -9,10 +9,10 @@
 //! grid has one periodic axis), and the plug speed is taken over the middle third of the width,
 //! where the side walls' drag has decayed for a layer much shallower than the channel is wide.
 use super::geometry::lattice::{cells, centre, for_each_index};
-use super::{Experiment, Manifest, Scene, yield_stress_pa};
+use super::{Experiment, Manifest, Scene, check_3d_only, slipping_walls, yield_stress_pa};
 use crate::manifest::validate::{Checker, NON_NEGATIVE, POSITIVE, between, fmt_num};
 use crate::manifest::Fluid;
-use crate::mps::{ParticleKind, Particles, Path, PeriodicX, RigidBody, Vector};
+use crate::mps::{ParticleKind, Particles, PeriodicX, Vector};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
@@ -95,35 +95,23 @@ fn closed_form(layer: &InclinedLayer, m: &Manifest) -> (f64, f64, f64) {
 
 impl Experiment for InclinedLayer {
     fn check(&self, m: &Manifest, c: &mut Checker) {
-        let width_ok = match (m.dimension, self.width_m) {
-            (3, None) => {
-                c.fail(
-                    "scene.width_m",
-                    "required in 3D: the width of the channel between the side walls (the neighbour grid has one periodic axis)".into(),
-                );
-                false
-            }
-            (3, Some(w)) => c.real("scene.width_m", w, POSITIVE),
-            (_, Some(_)) => {
-                c.fail(
-                    "scene.width_m",
-                    "is for dimension 3 only (a 2D layer has no width)".into(),
-                );
-                false
-            }
-            _ => true,
+        let width_ok = if m.dimension == 3 && self.width_m.is_none() {
+            c.fail(
+                "scene.width_m",
+                "required in 3D: the width of the channel between the side walls (the neighbour grid has one periodic axis)".into(),
+            );
+            false
+        } else {
+            check_3d_only(m, c, "scene.width_m", self.width_m, POSITIVE, "a 2D layer has no width")
         };
-        let slip_ok = match (m.dimension, self.side_slip_length_m) {
-            (3, Some(b)) => c.real("scene.side_slip_length_m", b, NON_NEGATIVE),
-            (_, Some(_)) => {
-                c.fail(
-                    "scene.side_slip_length_m",
-                    "is for dimension 3 only (a 2D layer has no side walls)".into(),
-                );
-                false
-            }
-            _ => true,
-        };
+        let slip_ok = check_3d_only(
+            m,
+            c,
+            "scene.side_slip_length_m",
+            self.side_slip_length_m,
+            NON_NEGATIVE,
+            "a 2D layer has no side walls",
+        );
         let depth_ok = c.real("scene.layer_depth_m", self.layer_depth_m, POSITIVE);
         let period_ok = c.real("scene.period_m", self.period_m, POSITIVE);
         c.real(
@@ -214,12 +202,7 @@ impl Experiment for InclinedLayer {
             // With a slip length the side walls are a body at rest, whose surface the viscous
             // terms treat as slipping (`mps::viscosity::SlipWall`).
             if let Some(slip_length_m) = self.side_slip_length_m {
-                bodies.push(RigidBody {
-                    first,
-                    end: particles.len(),
-                    path: Path::lift(0.0, Vector::<D>::zeros(), Vector::<D>::zeros()),
-                    slip_length_m: Some(slip_length_m),
-                });
+                bodies.push(slipping_walls(first, particles.len(), slip_length_m));
             }
         }
         let (domain_min_m, domain_max_m) = self.domain::<D>(m);

@@ -617,6 +617,41 @@ pub fn refuse_planes_without_images(m: &Manifest, c: &mut Checker, field: &str, 
     }
 }
 
+/// Checks an optional field that only a 3D scene takes: absent is fine; in 2D it fails
+/// naming `field` (`no_2d` says what a 2D scene lacks); in 3D its value must be in `range`.
+pub fn check_3d_only(
+    m: &Manifest,
+    c: &mut Checker,
+    field: &str,
+    value: Option<f64>,
+    range: crate::manifest::validate::Range,
+    no_2d: &str,
+) -> bool {
+    match (m.dimension, value) {
+        (_, None) => true,
+        (3, Some(v)) => c.real(field, v, range),
+        (_, Some(_)) => {
+            c.fail(field, format!("is for dimension 3 only ({no_2d})"));
+            false
+        }
+    }
+}
+
+/// Side walls at rest whose surface slips (Navier slip length `slip_length_m`; see
+/// `mps::viscosity::SlipWall`): the particles `first..end` as one body that never moves.
+pub fn slipping_walls<const D: usize>(
+    first: usize,
+    end: usize,
+    slip_length_m: f64,
+) -> RigidBody<D> {
+    RigidBody {
+        first,
+        end,
+        path: mps::Path::lift(0.0, Vector::<D>::zeros(), Vector::<D>::zeros()),
+        slip_length_m: Some(slip_length_m),
+    }
+}
+
 /// Whether the manifest's spacing passed its own check (scene checks that compare lengths
 /// with it skip otherwise).
 pub fn spacing_ok(m: &Manifest) -> bool {
