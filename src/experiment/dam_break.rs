@@ -194,7 +194,7 @@ pub fn build<const D: usize>(
         let mut sorted = Particles::<D>::default();
         for beside in [false, true] {
             for i in (0..particles.len()).filter(|&i| side(i) == beside) {
-                sorted.push(particles.position_m[i], particles.kind[i]);
+                sorted.push_tagged(particles.position_m[i], particles.kind[i], particles.tag[i]);
             }
         }
         let first = (0..particles.len()).filter(|&i| !side(i)).count();

@@ -5,9 +5,9 @@
 //! layer stays rigid when h <= h_c = tau_0 / (rho g sin theta); above, it shears in a bottom
 //! zone of thickness h - h_c under a plug moving at U = rho g sin(theta) (h - h_c)^2 / (2 mu_p)
 //! (a Newtonian film, tau_0 = 0: the Nusselt surface speed rho g sin(theta) h^2 / (2 mu)).
-//! In 3D the layer is a channel of width `width_m` between no-slip side walls (the neighbour
-//! grid has one periodic axis), and the plug speed is taken over the middle third of the width,
-//! where the side walls' drag has decayed for a layer much shallower than the channel is wide.
+//! In 3D the layer is a channel of width `width_m` between side walls (the neighbour grid has
+//! one periodic axis), no-slip or slipping (`side_slip_length_m`; free slip stands for a layer
+//! of unbounded width), and the plug speed is taken over the middle third of the width.
 use super::geometry::lattice::{cells, centre, for_each_index};
 use super::{Experiment, Manifest, Scene, check_3d_only, slipping_walls, yield_stress_pa};
 use crate::manifest::validate::{Checker, NON_NEGATIVE, POSITIVE, between, fmt_num};
