@@ -192,12 +192,13 @@ pub fn build<const D: usize>(
             particles.kind[i] != ParticleKind::Fluid && !(0.0..depth_m).contains(&y)
         };
         let mut sorted = Particles::<D>::default();
+        let mut first = 0;
         for beside in [false, true] {
+            first = sorted.len();
             for i in (0..particles.len()).filter(|&i| side(i) == beside) {
                 sorted.push_tagged(particles.position_m[i], particles.kind[i], particles.tag[i]);
             }
         }
-        let first = (0..particles.len()).filter(|&i| !side(i)).count();
         bodies.push(super::slipping_walls(first, sorted.len(), slip_length_m));
         particles = sorted;
     }

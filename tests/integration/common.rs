@@ -36,6 +36,16 @@ pub fn resolve(name: &str, sets: &[&str]) -> Resolved {
     experiment::load(&experiment(name), &sets).expect("manifest")
 }
 
+/// Asserts that `name` with `sets` is refused with an error that contains `field` (the
+/// field's name and the start of the reason).
+pub fn assert_refused(name: &str, sets: &[&str], field: &str) {
+    let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
+    let error = experiment::load(&experiment(name), &sets)
+        .expect_err(field)
+        .to_string();
+    assert!(error.contains(field), "{sets:?}: {error}");
+}
+
 /// `rodding_2d.yaml` at 10 mm, its rod 20 mm (two spacings, the narrowest it may be), with
 /// `sets` after: the coarse rodding of the tests.
 pub fn rodding_10_mm(sets: &[&str]) -> Resolved {

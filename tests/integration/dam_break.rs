@@ -307,10 +307,6 @@ fn a_3d_tank_with_slipping_side_walls_holds_the_same_particles_with_the_sides_as
             "scene.side_slip_length_m: must be >= 0",
         ),
     ] {
-        let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
-        let error = mps_runner::experiment::load(&common::experiment("dam_break_2d.yaml"), &sets)
-            .expect_err(field)
-            .to_string();
-        assert!(error.contains(field), "{sets:?}: {error}");
+        common::assert_refused("dam_break_2d.yaml", &sets, field);
     }
 }

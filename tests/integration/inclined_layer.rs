@@ -15,6 +15,11 @@ fn driving_pa_m() -> f64 {
     2300.0 * 9.81 * (5.0f64).to_radians().sin()
 }
 
+/// The arithmetic mean of `values`.
+fn mean_of(values: &[f64]) -> f64 {
+    values.iter().sum::<f64>() / values.len() as f64
+}
+
 /// The plug speed of every diagnostics row of the run at `path` from `from_s` on.
 fn plug_speeds_after(path: &std::path::Path, from_s: f64) -> Vec<f64> {
     let run = mps_runner::record::read_run(path).unwrap();
@@ -61,7 +66,7 @@ fn a_layer_twice_the_critical_depth_slides_on_a_sheared_zone_at_the_closed_form_
     let expected = driving_pa_m() * sheared * sheared / (2.0 * 50.0);
     let rows = plug_speeds_after(&result.path, 1.5);
     assert!(rows.len() >= 100, "{} rows after 1.5 s", rows.len());
-    let mean = rows.iter().sum::<f64>() / rows.len() as f64;
+    let mean = mean_of(&rows);
     assert!(
         (mean / expected - 1.0).abs() < 0.05,
         "mean plug {mean} m/s, closed form with the wall at its particles' centres {expected} m/s"
@@ -128,7 +133,7 @@ fn under_the_default_scheme_the_layer_holds_below_h_c_and_slides_at_u_above() {
     let (sliding, _dir) = run(&[]);
     let rows = plug_speeds_after(&sliding.path, 1.5);
     assert!(rows.len() >= 100, "{} rows after 1.5 s", rows.len());
-    let mean = rows.iter().sum::<f64>() / rows.len() as f64;
+    let mean = mean_of(&rows);
     let closed = sliding.summary.metrics["closed_form_plug_speed_m_s"];
     assert!(
         (mean / closed - 1.0).abs() < 0.05,
@@ -163,7 +168,7 @@ fn under_the_default_scheme_a_layer_one_row_past_h_c_yields_and_one_row_short_ho
     let (past, _dir) = run(&["scene.layer_depth_m=0.06", "time.end_s=6"]);
     assert!(past.summary.metrics["layer_depth_m"] > 0.0599);
     let rows = plug_speeds_after(&past.path, 0.5);
-    let mean = rows.iter().sum::<f64>() / rows.len() as f64;
+    let mean = mean_of(&rows);
     let closed = past.summary.metrics["closed_form_plug_speed_m_s"];
     assert!(
         mean > closed / 1.5 && mean < 1.5 * closed,
@@ -184,7 +189,7 @@ fn under_the_default_scheme_a_layer_one_row_past_h_c_yields_and_one_row_short_ho
 fn with_no_slip_at_the_wall_surface_the_plug_moves_at_the_nominal_closed_form_speed() {
     let (result, _dir) = run(&["mps.wall_surface_no_slip=true"], 2);
     let rows = plug_speeds_after(&result.path, 1.5);
-    let mean = rows.iter().sum::<f64>() / rows.len() as f64;
+    let mean = mean_of(&rows);
     let closed = result.summary.metrics["closed_form_plug_speed_m_s"];
     assert!(
         (mean / closed - 1.0).abs() < 0.05,
@@ -282,11 +287,7 @@ fn a_3d_layer_without_a_width_a_2d_width_or_a_short_period_is_refused_naming_the
             "scene.incline_deg: must be in (0, 90)",
         ),
     ] {
-        let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
-        let error = mps_runner::experiment::load(&common::experiment("inclined_layer.yaml"), &sets)
-            .expect_err(field)
-            .to_string();
-        assert!(error.contains(field), "{sets:?}: {error}");
+        common::assert_refused("inclined_layer.yaml", &sets, field);
     }
 }
 
@@ -329,7 +330,7 @@ fn a_3d_layer_between_slipping_side_walls_holds_below_h_c_and_slides_at_u_above(
     assert!((closed / expected - 1.0).abs() < 1e-12);
     let rows = plug_speeds_after(&sliding.path, 0.25);
     assert!(rows.len() >= 70, "{} rows after 0.25 s", rows.len());
-    let mean = rows.iter().sum::<f64>() / rows.len() as f64;
+    let mean = mean_of(&rows);
     assert!(
         (mean / closed - 1.0).abs() < 0.05,
         "mean plug {mean} m/s, closed form {closed} m/s"
