@@ -13,6 +13,7 @@ use super::{Experiment, Manifest, Scene, check_3d_only, slipping_walls, yield_st
 use crate::manifest::validate::{Checker, NON_NEGATIVE, POSITIVE, between, fmt_num};
 use crate::manifest::Fluid;
 use crate::mps::{ParticleKind, Particles, PeriodicX, Vector};
+use crate::rng::SplitMix64;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
@@ -36,6 +37,12 @@ pub struct InclinedLayer {
     /// Navier slip length of the side walls, in metres (3D; large: free slip, so that the
     /// channel stands for a layer of unbounded width). Absent: no slip.
     pub side_slip_length_m: Option<f64>,
+    /// The layer's particles start displaced from the lattice by up to this fraction of the
+    /// spacing in each coordinate (uniform, from `disorder_seed`): a disordered layer such as
+    /// a flow leaves behind. Absent: the lattice.
+    pub disorder: Option<f64>,
+    /// Seed of the SplitMix64 sequence that draws the displacements (absent: 1).
+    pub disorder_seed: Option<u64>,
 }
 
 impl Default for InclinedLayer {
@@ -46,6 +53,8 @@ impl Default for InclinedLayer {
             incline_deg: 5.0,
             width_m: None,
             side_slip_length_m: None,
+            disorder: None,
+            disorder_seed: None,
         }
     }
 }
@@ -112,6 +121,11 @@ impl Experiment for InclinedLayer {
             NON_NEGATIVE,
             "a 2D layer has no side walls",
         );
+        if let Some(disorder) = self.disorder {
+            // A quarter spacing keeps every particle 0.75 l0 from the floor's wall row and its
+            // neighbours apart by more than the collision distance's half spacing.
+            c.real("scene.disorder", disorder, between(0.0, true, 0.25, true));
+        }
         let depth_ok = c.real("scene.layer_depth_m", self.layer_depth_m, POSITIVE);
         let period_ok = c.real("scene.period_m", self.period_m, POSITIVE);
         c.real(
@@ -160,8 +174,18 @@ impl Experiment for InclinedLayer {
             hi[1] = width;
         }
         hi[D - 1] = rows;
+        let disorder_m = self.disorder.unwrap_or(0.0) * l0;
+        let mut draws = SplitMix64::new(self.disorder_seed.unwrap_or(1));
+        let period_m = self.period(l0).period_m;
         for_each_index(lo, hi, |idx| {
-            particles.push(centre(idx, l0), ParticleKind::Fluid)
+            let mut x = centre(idx, l0);
+            if disorder_m > 0.0 {
+                for a in 0..D {
+                    x[a] += disorder_m * (2.0 * draws.unit() - 1.0);
+                }
+                x[0] = x[0].rem_euclid(period_m);
+            }
+            particles.push(x, ParticleKind::Fluid)
         });
         // The floor: wall rows on top, dummies below, across the whole period (and in 3D
         // under the side walls too).

@@ -158,6 +158,8 @@ pub fn canonical_text<S: SceneSection>(manifest: &Manifest<S>) -> String {
         ("scene", "cone_slip_length_m"),
         ("scene", "width_m"),
         ("scene", "side_slip_length_m"),
+        ("scene", "disorder"),
+        ("scene", "disorder_seed"),
     ] {
         // null = the rule that held before these fields existed.
         if let Some(map) = value.get_mut(section).and_then(Value::as_object_mut)

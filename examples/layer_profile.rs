@@ -1,0 +1,147 @@
+//! The velocity profile of a recorded inclined layer against the Bingham closed form: for a
+//! checkpoint, the fluid binned by height in rows of one spacing (count, mean along-slope
+//! speed, closed form u(y) = (rho g sin theta / mu_p) ((h - h_c) y - y^2 / 2) below the plug,
+//! U in it), and the layer's top (largest height, 99th percentile). Where a disordered layer
+//! moves faster or slower than U, this says whether its floor slips, its sheared zone is
+//! thicker or the layer has swollen.
+//!
+//! Usage: cargo run --release --example layer_profile -- FILE.mcap [--at T_S]
+use mps_runner::experiment::SceneSpec;
+use mps_runner::experiment::yield_stress_pa;
+use mps_runner::manifest::{self, Fluid};
+use mps_runner::record::read_run;
+use mps_runner::restore::manifest_of;
+use std::path::PathBuf;
+
+fn main() {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let file = PathBuf::from(args.first().expect("a run file"));
+    let at_s = args
+        .iter()
+        .position(|a| a == "--at")
+        .map(|i| args[i + 1].parse::<f64>().expect("--at needs a number"))
+        .unwrap_or(f64::INFINITY);
+    let run = read_run(&file).unwrap_or_else(|e| panic!("{}: {e}", file.display()));
+    let recorded = manifest_of(&run).unwrap_or_else(|e| panic!("{e}"));
+    let resolved = manifest::from_str_as_of::<SceneSpec>(
+        &recorded.source_text,
+        "stored source",
+        &recorded.overrides,
+        recorded.default_preset,
+        recorded.preset_revision,
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    let m = &resolved.manifest;
+    let state = run
+        .states
+        .iter()
+        .rev()
+        .find(|s| s.time_s <= at_s + 1e-9)
+        .expect("no checkpoint at or before --at");
+    let d = state.dimension as usize;
+    let l0 = m.spacing_m;
+    let SceneSpec::InclinedLayer(layer) = &m.scene else {
+        panic!("not an inclined layer")
+    };
+    let theta = layer.incline_deg.to_radians();
+    let driving = m.fluid.density_kg_m3() * m.gravity_m_s2 * theta.sin();
+    let mu = match m.fluid {
+        Fluid::Newtonian { viscosity_pa_s, .. } => viscosity_pa_s,
+        Fluid::Bingham {
+            plastic_viscosity_pa_s,
+            ..
+        }
+        | Fluid::BiViscosity {
+            plastic_viscosity_pa_s,
+            ..
+        } => plastic_viscosity_pa_s,
+    };
+    let h = (layer.layer_depth_m / l0).round() * l0;
+    let hc = yield_stress_pa(&m.fluid) / driving;
+    let sheared = (h - hc).max(0.0);
+    let closed = |y: f64| {
+        let y = y.min(sheared);
+        driving / mu * (sheared * y - 0.5 * y * y)
+    };
+    // The viscous Laplacian's response to u = y^2 / 2 (exact: 1) on this arrangement:
+    // (d / (lambda n0)) sum_j w(r_ij) dy^2 over every particle within its radius, x periodic.
+    let radius_m = m.mps.laplacian_radius * l0;
+    let refs = match d {
+        2 => mps_runner::mps::kernel::RefValues::on_lattice::<2>(
+            l0,
+            m.mps.number_density_radius * l0,
+            radius_m,
+        ),
+        _ => mps_runner::mps::kernel::RefValues::on_lattice::<3>(
+            l0,
+            m.mps.number_density_radius * l0,
+            radius_m,
+        ),
+    };
+    let period_m = (layer.period_m / l0).round() * l0;
+    let count_all = state.kind.len();
+    let response = |i: usize| -> f64 {
+        let xi = &state.position_m[i * d..i * d + d];
+        let mut sum = 0.0;
+        for j in 0..count_all {
+            if j == i {
+                continue;
+            }
+            let xj = &state.position_m[j * d..j * d + d];
+            let mut dx = xj[0] - xi[0];
+            dx -= (dx / period_m).round() * period_m;
+            let mut r2 = dx * dx;
+            for a in 1..d {
+                r2 += (xj[a] - xi[a]) * (xj[a] - xi[a]);
+            }
+            let dy = xj[d - 1] - xi[d - 1];
+            sum += mps_runner::mps::kernel::weight(r2.sqrt(), radius_m) * dy * dy;
+        }
+        d as f64 * sum / (refs.lambda_m2 * refs.n0_lap)
+    };
+    let mut heights = Vec::new();
+    let rows = (2.0 * h / l0).ceil() as usize + 2;
+    let (mut sum, mut count, mut ysum, mut lap) = (
+        vec![0.0; rows],
+        vec![0usize; rows],
+        vec![0.0; rows],
+        vec![0.0; rows],
+    );
+    for (i, &kind) in state.kind.iter().enumerate() {
+        if kind != 0 {
+            continue;
+        }
+        let y = state.position_m[i * d + d - 1];
+        heights.push(y);
+        let row = ((y / l0).floor().max(0.0) as usize).min(rows - 1);
+        sum[row] += state.velocity_m_s[i * d];
+        ysum[row] += y;
+        lap[row] += response(i);
+        count[row] += 1;
+    }
+    heights.sort_by(f64::total_cmp);
+    let top = heights.last().copied().unwrap_or(0.0);
+    let p99 = heights[(0.99 * (heights.len() - 1) as f64) as usize];
+    println!(
+        "# t = {:.3} s; h = {h} m, h_c = {hc:.4} m, U = {:.2} mm/s; top {:.4} m (+{:.2} l0 over h - l0/2), 99th percentile {:.4} m",
+        state.time_s,
+        1e3 * closed(sheared),
+        top,
+        (top - (h - 0.5 * l0)) / l0,
+        p99
+    );
+    println!("row  y_mean_m  count  u_mm_s  closed_mm_s  laplacian_of_y2/2");
+    for r in 0..rows {
+        if count[r] == 0 {
+            continue;
+        }
+        let y = ysum[r] / count[r] as f64;
+        println!(
+            "{r:3}  {y:.4}  {:5}  {:8.2}  {:8.2}  {:.4}",
+            count[r],
+            1e3 * sum[r] / count[r] as f64,
+            1e3 * closed(y),
+            lap[r] / count[r] as f64
+        );
+    }
+}
