@@ -1,9 +1,12 @@
 //! The velocity profile of a recorded inclined layer against the Bingham closed form: for a
 //! checkpoint, the fluid binned by height in rows of one spacing (count, mean along-slope
 //! speed, closed form u(y) = (rho g sin theta / mu_p) ((h - h_c) y - y^2 / 2) below the plug,
-//! U in it), and the layer's top (largest height, 99th percentile). Where a disordered layer
-//! moves faster or slower than U, this says whether its floor slips, its sheared zone is
-//! thicker or the layer has swollen.
+//! U in it), the viscous Laplacian's answer to u = y^2/2 on the particles as they are (exact:
+//! 1), the yield solve's multiplier (its shear component and its size |lambda|/sqrt(2), both
+//! tau_y where the fluid yields in simple shear), and the layer's top (largest height, 99th
+//! percentile). Where a disordered layer (`scene.disorder`) moves faster or slower than U,
+//! this says which of the floor, the viscous term, the yield term or a swollen layer it is
+//! (docs/validation.md, "A disordered layer on an incline").
 //!
 //! Usage: cargo run --release --example layer_profile -- FILE.mcap [--at T_S]
 use mps_runner::experiment::SceneSpec;
@@ -107,6 +110,11 @@ fn main() {
         vec![0.0; rows],
         vec![0.0; rows],
     );
+    // The yield solve's multiplier (the yield part of the deviatoric stress): its shear
+    // component and its size |lambda| / sqrt(2), both tau_y where the fluid yields in simple
+    // shear.
+    let (mut shear, mut size) = (vec![0.0; rows], vec![0.0; rows]);
+    let stress = &state.yield_stress_pa;
     for (i, &kind) in state.kind.iter().enumerate() {
         if kind != 0 {
             continue;
@@ -117,6 +125,11 @@ fn main() {
         sum[row] += state.velocity_m_s[i * d];
         ysum[row] += y;
         lap[row] += response(i);
+        if stress.len() == count_all * d * d {
+            let t = &stress[i * d * d..(i + 1) * d * d];
+            shear[row] += t[d - 1];
+            size[row] += t.iter().map(|v| v * v).sum::<f64>().sqrt() / std::f64::consts::SQRT_2;
+        }
         count[row] += 1;
     }
     heights.sort_by(f64::total_cmp);
@@ -130,18 +143,22 @@ fn main() {
         (top - (h - 0.5 * l0)) / l0,
         p99
     );
-    println!("row  y_mean_m  count  u_mm_s  closed_mm_s  laplacian_of_y2/2");
+    println!(
+        "row  y_mean_m  count  u_mm_s  closed_mm_s  laplacian_of_y2/2  yield_shear_pa  yield_size_pa"
+    );
     for r in 0..rows {
         if count[r] == 0 {
             continue;
         }
         let y = ysum[r] / count[r] as f64;
         println!(
-            "{r:3}  {y:.4}  {:5}  {:8.2}  {:8.2}  {:.4}",
+            "{r:3}  {y:.4}  {:5}  {:8.2}  {:8.2}  {:.4}  {:7.2}  {:7.2}",
             count[r],
             1e3 * sum[r] / count[r] as f64,
             1e3 * closed(y),
-            lap[r] / count[r] as f64
+            lap[r] / count[r] as f64,
+            shear[r] / count[r] as f64,
+            size[r] / count[r] as f64
         );
     }
 }
