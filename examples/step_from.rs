@@ -13,20 +13,42 @@
 //! S seconds of simulated time (default 0.1): the mean and largest kinetic energy of the
 //! fluid over the interval, the largest speed and the non-flowing share at its end, and the
 //! test's metric NAME there (e.g. `filling_distance_m`; the names of the summary's metrics).
+//! `--stage-momentum BAND_M --area A_M2` also sums what each stage of the step does to the
+//! fluid's momentum along x in bands of height BAND_M ([`mps_runner::mps::StageMomentum`]) and
+//! prints, per band, each stage's force on the band and, summed from the top down, the shear
+//! stress it carries across the band's floor, both in Pa over the area A_M2 of a band (the
+//! period in 2D, per metre of depth; period times width in 3D), and each stage's force on
+//! the whole fluid (docs/validation.md, "A disordered layer on an incline").
 use mps_runner::experiment::{SceneSpec, experiment_metrics};
 use mps_runner::manifest;
-use mps_runner::mps::{ParticleKind, Solver};
+use mps_runner::mps::{ParticleKind, STAGE_NAMES, Solver, StageMomentum};
 use mps_runner::proto::mps::v1::StateCheckpoint;
 use mps_runner::record::read_run;
 use mps_runner::restore::manifest_of;
 use std::path::PathBuf;
 
+/// How far to step on and what to print.
+struct Plan {
+    for_s: f64,
+    every_s: f64,
+    metric: Option<String>,
+    /// `--stage-momentum`'s band height, and `--area`.
+    band_m: Option<f64>,
+    area_m2: f64,
+}
+
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let mut file = None;
-    let (mut at_s, mut for_s, mut every_s, mut threads) = (0.0, 1.0, 0.1, 1usize);
+    let (mut at_s, mut threads) = (0.0, 1usize);
+    let mut plan = Plan {
+        for_s: 1.0,
+        every_s: 0.1,
+        metric: None,
+        band_m: None,
+        area_m2: 1.0,
+    };
     let mut sets = Vec::new();
-    let mut metric = None;
     let mut i = 0;
     while i < args.len() {
         let value = |i: usize| -> f64 {
@@ -36,11 +58,13 @@ fn main() {
         };
         match args[i].as_str() {
             "--at" => (at_s, i) = (value(i), i + 1),
-            "--for" => (for_s, i) = (value(i), i + 1),
-            "--every" => (every_s, i) = (value(i), i + 1),
+            "--for" => (plan.for_s, i) = (value(i), i + 1),
+            "--every" => (plan.every_s, i) = (value(i), i + 1),
             "--threads" => (threads, i) = (value(i) as usize, i + 1),
+            "--stage-momentum" => (plan.band_m, i) = (Some(value(i)), i + 1),
+            "--area" => (plan.area_m2, i) = (value(i), i + 1),
             "--metric" => {
-                metric = Some(args.get(i + 1).expect("--metric needs a name").clone());
+                plan.metric = Some(args.get(i + 1).expect("--metric needs a name").clone());
                 i += 1;
             }
             a if a.starts_with("--") => panic!("unknown option {a}"),
@@ -74,8 +98,8 @@ fn main() {
         .unwrap();
     let m = &resolved.manifest;
     pool.install(|| match m.dimension {
-        2 => step_on::<2>(m, state, states, for_s, every_s, metric.as_deref()),
-        _ => step_on::<3>(m, state, states, for_s, every_s, metric.as_deref()),
+        2 => step_on::<2>(m, state, states, &plan),
+        _ => step_on::<3>(m, state, states, &plan),
     });
 }
 
@@ -83,16 +107,24 @@ fn step_on<const D: usize>(
     m: &mps_runner::experiment::Manifest,
     state: &StateCheckpoint,
     recorded: &[StateCheckpoint],
-    for_s: f64,
-    every_s: f64,
-    metric: Option<&str>,
+    plan: &Plan,
 ) {
+    let (for_s, every_s, metric) = (plan.for_s, plan.every_s, plan.metric.as_deref());
     let scene = mps_runner::experiment::build_scene::<D>(m);
     let config = mps_runner::run::solver_config(m, &scene);
     let mut solver: Solver<D> = mps_runner::checkpoint::solver_from_message(config, state)
         .unwrap_or_else(|e| panic!("{e}"));
     let start = solver.time_s;
     let end = start + for_s;
+    if let Some(band_m) = plan.band_m {
+        let top = solver
+            .particles
+            .position_m
+            .iter()
+            .fold(0.0f64, |top, x| top.max(x[D - 1]));
+        let bands = ((2.0 * top / band_m).ceil() as usize).clamp(1, 4096);
+        solver.stage_momentum = Some(StageMomentum::new(0, band_m, bands));
+    }
     let volume = m.spacing_m.powi(D as i32);
     let kinetic = |s: &Solver<D>| -> f64 {
         let p = &s.particles;
@@ -147,6 +179,9 @@ fn step_on<const D: usize>(
             next += every_s;
         }
     }
+    if let Some(sums) = &solver.stage_momentum {
+        print_stage_momentum(sums, m, plan.area_m2);
+    }
     // With nothing changed, a recorded checkpoint at the same step must be reproduced bit for
     // bit (the replay `runner verify` does); say so, so that a changed setting is the only
     // difference a comparison sees.
@@ -160,4 +195,58 @@ fn step_on<const D: usize>(
             if same { "identical" } else { "differs" }
         );
     }
+}
+
+/// Each stage's force on each band (Pa over `area_m2`: rho V sum du / (T A)) and, summed from
+/// the top down, the shear stress it carries across the band's floor; then its force on the
+/// whole fluid.
+fn print_stage_momentum(sums: &StageMomentum, m: &mps_runner::experiment::Manifest, area_m2: f64) {
+    let volume = m.spacing_m.powi(m.dimension as i32);
+    let scale = m.fluid.density_kg_m3() * volume / (sums.time_s * area_m2);
+    let used: Vec<usize> = (0..sums.particle_steps.len())
+        .filter(|&b| sums.particle_steps[b] > 0.0)
+        .collect();
+    println!(
+        "# stage momentum over {:.4} s, bands of {} m; force on the band, Pa",
+        sums.time_s, sums.band_m
+    );
+    println!("band  y_m  particles  {}", STAGE_NAMES.join("  "));
+    for &b in &used {
+        let forces: Vec<String> = sums.change_m_s[b]
+            .iter()
+            .map(|c| format!("{:.3}", c * scale))
+            .collect();
+        println!(
+            "{b}  {:.4}  {:.1}  {}",
+            b as f64 * sums.band_m,
+            sums.particle_steps[b] / sums.steps.max(1) as f64,
+            forces.join("  ")
+        );
+    }
+    println!(
+        "# shear stress across the band's floor (the stage's force on every band above it), Pa"
+    );
+    println!("band  y_m  {}", STAGE_NAMES.join("  "));
+    let mut above = [0.0; STAGE_NAMES.len()];
+    let mut rows = Vec::new();
+    for &b in used.iter().rev() {
+        for (a, c) in above.iter_mut().zip(&sums.change_m_s[b]) {
+            *a += c * scale;
+        }
+        let text: Vec<String> = above.iter().map(|a| format!("{a:.3}")).collect();
+        rows.push(format!(
+            "{b}  {:.4}  {}",
+            b as f64 * sums.band_m,
+            text.join("  ")
+        ));
+    }
+    for row in rows.iter().rev() {
+        println!("{row}");
+    }
+    let whole: Vec<String> = STAGE_NAMES
+        .iter()
+        .zip(&above)
+        .map(|(n, a)| format!("{n} {a:.3}"))
+        .collect();
+    println!("# on the whole fluid, Pa: {}", whole.join(", "));
 }

@@ -21,5 +21,6 @@ pub use inlet::Inlet;
 pub use particles::{ParticleKind, Particles, Vector};
 pub use rheology::Rheology;
 pub use solver::{
-    PeriodicX, PressureScheme, Solver, SolverConfig, SourceTerm, StageTimes, StepError, StepReport,
+    PeriodicX, PressureScheme, STAGE_NAMES, Solver, SolverConfig, SourceTerm, StageMomentum,
+    StageTimes, StepError, StepReport,
 };

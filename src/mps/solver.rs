@@ -24,12 +24,15 @@ use super::viscosity::{
 };
 use super::yield_solve::{Tensor, YieldSolve};
 use rayon::prelude::*;
+use stage_momentum::StepProbe;
+pub use stage_momentum::{STAGE_NAMES, StageMomentum};
 use std::time::Instant;
 
 mod contact;
 mod exact;
 mod incremental;
 mod neighbours;
+mod stage_momentum;
 mod standard;
 mod state;
 
@@ -307,6 +310,9 @@ pub struct Solver<const D: usize> {
     pub fresh_lists: bool,
     /// Time spent per stage so far.
     pub timing: StageTimes,
+    /// With `Some`, each step adds what its stages do to the fluid's momentum, band by band
+    /// (a diagnostic; nothing of the state depends on it).
+    pub stage_momentum: Option<StageMomentum>,
 }
 
 /// Extra reach of the neighbour lists beyond the Laplacian radius, in spacings: lists stay
@@ -358,6 +364,7 @@ impl<const D: usize> Solver<D> {
             listed_at_m: Vec::new(),
             fresh_lists: false,
             timing: StageTimes::default(),
+            stage_momentum: None,
         }
     }
 
@@ -439,12 +446,24 @@ impl<const D: usize> Solver<D> {
     /// Advances the state by dt_s.
     pub fn step(&mut self, dt_s: f64) -> Result<StepReport, StepError> {
         let started = Instant::now();
-        let result = self.step_stages(dt_s);
+        let mut sums = self.stage_momentum.take();
+        let result = self.step_stages(dt_s, sums.as_mut());
+        if let Some(s) = &mut sums
+            && result.is_ok()
+        {
+            s.time_s += dt_s;
+            s.steps += 1;
+        }
+        self.stage_momentum = sums;
         self.timing.step_total_s += started.elapsed().as_secs_f64();
         result
     }
 
-    fn step_stages(&mut self, dt_s: f64) -> Result<StepReport, StepError> {
+    fn step_stages(
+        &mut self,
+        dt_s: f64,
+        mut sums: Option<&mut StageMomentum>,
+    ) -> Result<StepReport, StepError> {
         // (1) Inlets pour; (2) rigid bodies carry their path velocity during the step (a
         // moving no-slip wall for the viscous stage).
         self.pour();
@@ -457,6 +476,9 @@ impl<const D: usize> Solver<D> {
         // (3) Neighbours at the current positions.
         self.rebuild_neighbours();
         self.refresh_pairs();
+        let mut probe = sums
+            .as_deref_mut()
+            .map(|s| StepProbe::start(s, &self.particles));
         // (4) The carried pressure's force and (5) viscosity (implicit, with the effective
         // viscosity of the rheology) and gravity give the predicted velocity u*.
         let start_density = match self.config.source_term {
@@ -508,6 +530,22 @@ impl<const D: usize> Solver<D> {
                 step: self.step,
             });
         }
+        if let (Some(probe), Some(s)) = (&mut probe, sums.as_deref_mut()) {
+            // The prediction's three parts: u* = u + dt (g + a_p) + the implicit viscous and
+            // yield step's change.
+            let axis = s.axis;
+            let body = self.gravity()[axis] * dt_s;
+            let carried = |i: usize| pressure_accel.as_deref().map_or(0.0, |a| a[i][axis] * dt_s);
+            probe.add(s, 0, carried);
+            probe.add(s, 6, |_| body);
+            probe.add(s, 1, |i| {
+                stage.velocity_m_s[i][axis]
+                    - body
+                    - carried(i)
+                    - self.particles.velocity_m_s[i][axis]
+            });
+            probe.reset(axis, &stage.velocity_m_s);
+        }
         let non_flowing_fraction = self.non_flowing_fraction(&stage.strain_invariant);
         self.strain_invariant = stage.strain_invariant;
         self.yield_stress_pa = stage.yield_stress_pa;
@@ -536,6 +574,9 @@ impl<const D: usize> Solver<D> {
         // (7) Neighbours at the predicted positions, used by every later stage of the step.
         self.rebuild_neighbours();
         self.collide(dt_s, false);
+        if let (Some(probe), Some(s)) = (&mut probe, sums.as_deref_mut()) {
+            probe.mark(s, 2, &self.particles.velocity_m_s);
+        }
         self.refresh_pairs();
 
         // (8) Pressure, and the correction of velocity and position.
@@ -544,6 +585,9 @@ impl<const D: usize> Solver<D> {
         } else {
             self.standard_projection(dt_s, start_density.as_deref())?
         };
+        if let (Some(probe), Some(s)) = (&mut probe, sums.as_deref_mut()) {
+            probe.mark(s, 3, &self.particles.velocity_m_s);
+        }
         // (9) Pair stabilisation and particle shifting, (10) fluid-wall collisions once more.
         if incremental && self.config.pair_stabilisation_m > 0.0 {
             self.stabilise_pairs(dt_s, self.config.pair_stabilisation_m);
@@ -551,12 +595,18 @@ impl<const D: usize> Solver<D> {
         if incremental && self.config.particle_shifting > 0.0 {
             self.shift_particles(dt_s);
         }
+        if let (Some(probe), Some(s)) = (&mut probe, sums.as_deref_mut()) {
+            probe.mark(s, 4, &self.particles.velocity_m_s);
+        }
         if self.config.wall_collision_second_pass {
             // The correction can push a free-surface particle into a gap of the wall lattice
             // (see `wall_collision_distance_m`): fluid-wall pairs collide once more.
             self.collide(dt_s, true);
         }
 
+        if let (Some(probe), Some(s)) = (&mut probe, sums) {
+            probe.mark(s, 5, &self.particles.velocity_m_s);
+        }
         // (11) The clock, and the state's check.
         self.time_s += dt_s;
         self.step += 1;
