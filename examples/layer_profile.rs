@@ -10,8 +10,7 @@
 //!
 //! Usage: cargo run --release --example layer_profile -- FILE.mcap [--at T_S]
 use mps_runner::experiment::SceneSpec;
-use mps_runner::experiment::yield_stress_pa;
-use mps_runner::manifest::{self, Fluid};
+use mps_runner::manifest;
 use mps_runner::record::read_run;
 use mps_runner::restore::manifest_of;
 use std::path::PathBuf;
@@ -46,26 +45,9 @@ fn main() {
     let SceneSpec::InclinedLayer(layer) = &m.scene else {
         panic!("not an inclined layer")
     };
-    let theta = layer.incline_deg.to_radians();
-    let driving = m.fluid.density_kg_m3() * m.gravity_m_s2 * theta.sin();
-    let mu = match m.fluid {
-        Fluid::Newtonian { viscosity_pa_s, .. } => viscosity_pa_s,
-        Fluid::Bingham {
-            plastic_viscosity_pa_s,
-            ..
-        }
-        | Fluid::BiViscosity {
-            plastic_viscosity_pa_s,
-            ..
-        } => plastic_viscosity_pa_s,
-    };
     let h = (layer.layer_depth_m / l0).round() * l0;
-    let hc = yield_stress_pa(&m.fluid) / driving;
-    let sheared = (h - hc).max(0.0);
-    let closed = |y: f64| {
-        let y = y.min(sheared);
-        driving / mu * (sheared * y - 0.5 * y * y)
-    };
+    let (_, hc, plug) = layer.closed_form_speed_m_s(m, 0.0);
+    let closed = |y: f64| layer.closed_form_speed_m_s(m, y).0;
     // The viscous Laplacian's response to u = y^2 / 2 (exact: 1) on this arrangement:
     // (d / (lambda n0)) sum_j w(r_ij) dy^2 over every particle within its radius, x periodic.
     let radius_m = m.mps.laplacian_radius * l0;
@@ -138,7 +120,7 @@ fn main() {
     println!(
         "# t = {:.3} s; h = {h} m, h_c = {hc:.4} m, U = {:.2} mm/s; top {:.4} m (+{:.2} l0 over h - l0/2), 99th percentile {:.4} m",
         state.time_s,
-        1e3 * closed(sheared),
+        1e3 * plug,
         top,
         (top - (h - 0.5 * l0)) / l0,
         p99

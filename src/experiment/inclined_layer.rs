@@ -79,10 +79,9 @@ impl InclinedLayer {
     }
 }
 
-/// (rho g sin theta, h_c, U) of the closed form for `m`'s fluid.
-fn closed_form(layer: &InclinedLayer, m: &Manifest) -> (f64, f64, f64) {
-    let driving = m.fluid.density_kg_m3() * m.gravity_m_s2 * libm::sin(layer.incline_rad());
-    let viscosity = match m.fluid {
+/// The plastic viscosity of `fluid` (a Newtonian fluid's viscosity; its h_c is 0).
+fn plastic_viscosity_pa_s(fluid: &Fluid) -> f64 {
+    match *fluid {
         Fluid::Newtonian { viscosity_pa_s, .. } => viscosity_pa_s,
         Fluid::Bingham {
             plastic_viscosity_pa_s,
@@ -92,7 +91,13 @@ fn closed_form(layer: &InclinedLayer, m: &Manifest) -> (f64, f64, f64) {
             plastic_viscosity_pa_s,
             ..
         } => plastic_viscosity_pa_s,
-    };
+    }
+}
+
+/// (rho g sin theta, h_c, U) of the closed form for `m`'s fluid.
+fn closed_form(layer: &InclinedLayer, m: &Manifest) -> (f64, f64, f64) {
+    let driving = m.fluid.density_kg_m3() * m.gravity_m_s2 * libm::sin(layer.incline_rad());
+    let viscosity = plastic_viscosity_pa_s(&m.fluid);
     let critical_m = yield_stress_pa(&m.fluid) / driving;
     let sheared_m = (layer.depth_m(m.spacing_m) - critical_m).max(0.0);
     (
@@ -100,6 +105,19 @@ fn closed_form(layer: &InclinedLayer, m: &Manifest) -> (f64, f64, f64) {
         critical_m,
         driving * sheared_m * sheared_m / (2.0 * viscosity),
     )
+}
+
+impl InclinedLayer {
+    /// The closed form's along-slope speed at `y_m` above the floor: the sheared zone's
+    /// (rho g sin theta / mu_p) ((h - h_c) y - y^2 / 2) below h - h_c, the plug's U above.
+    /// With the layer's depth on the lattice (whole rows) and its h_c and U.
+    pub fn closed_form_speed_m_s(&self, m: &Manifest, y_m: f64) -> (f64, f64, f64) {
+        let (driving, critical_m, plug_m_s) = closed_form(self, m);
+        let sheared_m = (self.depth_m(m.spacing_m) - critical_m).max(0.0);
+        let y = y_m.clamp(0.0, sheared_m);
+        let speed = driving / plastic_viscosity_pa_s(&m.fluid) * (sheared_m * y - 0.5 * y * y);
+        (speed, critical_m, plug_m_s)
+    }
 }
 
 impl Experiment for InclinedLayer {
