@@ -462,7 +462,7 @@ impl<const D: usize> Solver<D> {
     fn step_stages(
         &mut self,
         dt_s: f64,
-        mut sums: Option<&mut StageMomentum>,
+        sums: Option<&mut StageMomentum>,
     ) -> Result<StepReport, StepError> {
         // (1) Inlets pour; (2) rigid bodies carry their path velocity during the step (a
         // moving no-slip wall for the viscous stage).
@@ -476,9 +476,7 @@ impl<const D: usize> Solver<D> {
         // (3) Neighbours at the current positions.
         self.rebuild_neighbours();
         self.refresh_pairs();
-        let mut probe = sums
-            .as_deref_mut()
-            .map(|s| StepProbe::start(s, &self.particles));
+        let mut probe = sums.map(|s| StepProbe::start(s, &self.particles));
         // (4) The carried pressure's force and (5) viscosity (implicit, with the effective
         // viscosity of the rheology) and gravity give the predicted velocity u*.
         let start_density = match self.config.source_term {
@@ -530,21 +528,21 @@ impl<const D: usize> Solver<D> {
                 step: self.step,
             });
         }
-        if let (Some(probe), Some(s)) = (&mut probe, sums.as_deref_mut()) {
+        if let Some(probe) = &mut probe {
             // The prediction's three parts: u* = u + dt (g + a_p) + the implicit viscous and
             // yield step's change.
-            let axis = s.axis;
+            let axis = probe.axis();
             let body = self.gravity()[axis] * dt_s;
             let carried = |i: usize| pressure_accel.as_deref().map_or(0.0, |a| a[i][axis] * dt_s);
-            probe.add(s, 0, carried);
-            probe.add(s, 6, |_| body);
-            probe.add(s, 1, |i| {
+            probe.add(0, carried);
+            probe.add(6, |_| body);
+            probe.add(1, |i| {
                 stage.velocity_m_s[i][axis]
                     - body
                     - carried(i)
                     - self.particles.velocity_m_s[i][axis]
             });
-            probe.reset(axis, &stage.velocity_m_s);
+            probe.reset(&stage.velocity_m_s);
         }
         let non_flowing_fraction = self.non_flowing_fraction(&stage.strain_invariant);
         self.strain_invariant = stage.strain_invariant;
@@ -574,8 +572,8 @@ impl<const D: usize> Solver<D> {
         // (7) Neighbours at the predicted positions, used by every later stage of the step.
         self.rebuild_neighbours();
         self.collide(dt_s, false);
-        if let (Some(probe), Some(s)) = (&mut probe, sums.as_deref_mut()) {
-            probe.mark(s, 2, &self.particles.velocity_m_s);
+        if let Some(probe) = &mut probe {
+            probe.mark(2, &self.particles.velocity_m_s);
         }
         self.refresh_pairs();
 
@@ -585,8 +583,8 @@ impl<const D: usize> Solver<D> {
         } else {
             self.standard_projection(dt_s, start_density.as_deref())?
         };
-        if let (Some(probe), Some(s)) = (&mut probe, sums.as_deref_mut()) {
-            probe.mark(s, 3, &self.particles.velocity_m_s);
+        if let Some(probe) = &mut probe {
+            probe.mark(3, &self.particles.velocity_m_s);
         }
         // (9) Pair stabilisation and particle shifting, (10) fluid-wall collisions once more.
         if incremental && self.config.pair_stabilisation_m > 0.0 {
@@ -595,8 +593,8 @@ impl<const D: usize> Solver<D> {
         if incremental && self.config.particle_shifting > 0.0 {
             self.shift_particles(dt_s);
         }
-        if let (Some(probe), Some(s)) = (&mut probe, sums.as_deref_mut()) {
-            probe.mark(s, 4, &self.particles.velocity_m_s);
+        if let Some(probe) = &mut probe {
+            probe.mark(4, &self.particles.velocity_m_s);
         }
         if self.config.wall_collision_second_pass {
             // The correction can push a free-surface particle into a gap of the wall lattice
@@ -604,8 +602,8 @@ impl<const D: usize> Solver<D> {
             self.collide(dt_s, true);
         }
 
-        if let (Some(probe), Some(s)) = (&mut probe, sums) {
-            probe.mark(s, 5, &self.particles.velocity_m_s);
+        if let Some(probe) = &mut probe {
+            probe.mark(5, &self.particles.velocity_m_s);
         }
         // (11) The clock, and the state's check.
         self.time_s += dt_s;

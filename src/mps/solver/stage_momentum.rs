@@ -46,14 +46,16 @@ impl StageMomentum {
     }
 }
 
-/// One step's bookkeeping: the bands and the velocity component before the stage running.
-pub(super) struct StepProbe {
+/// One step's bookkeeping: the sums it adds to, the bands and the velocity component before
+/// the stage running.
+pub(super) struct StepProbe<'a> {
+    sums: &'a mut StageMomentum,
     bands: Vec<Option<usize>>,
     before: Vec<f64>,
 }
 
-impl StepProbe {
-    pub(super) fn start<const D: usize>(sums: &mut StageMomentum, p: &Particles<D>) -> Self {
+impl<'a> StepProbe<'a> {
+    pub(super) fn start<const D: usize>(sums: &'a mut StageMomentum, p: &Particles<D>) -> Self {
         let last = sums.particle_steps.len() - 1;
         let bands: Vec<Option<usize>> = (0..p.len())
             .map(|i| {
@@ -67,36 +69,39 @@ impl StepProbe {
             sums.particle_steps[*b] += 1.0;
         }
         let before = p.velocity_m_s.iter().map(|v| v[sums.axis]).collect();
-        Self { bands, before }
+        Self {
+            sums,
+            bands,
+            before,
+        }
+    }
+
+    pub(super) fn axis(&self) -> usize {
+        self.sums.axis
     }
 
     /// Adds `change(i)` to stage `stage` of i's band for every fluid particle.
-    pub(super) fn add(
-        &self,
-        sums: &mut StageMomentum,
-        stage: usize,
-        change: impl Fn(usize) -> f64,
-    ) {
+    pub(super) fn add(&mut self, stage: usize, change: impl Fn(usize) -> f64) {
         for (i, band) in self.bands.iter().enumerate() {
             if let Some(b) = band {
-                sums.change_m_s[*b][stage] += change(i);
+                self.sums.change_m_s[*b][stage] += change(i);
             }
         }
     }
 
     /// Adds the change of the velocities since the last mark to `stage`, and marks them.
-    pub(super) fn mark<const D: usize>(
-        &mut self,
-        sums: &mut StageMomentum,
-        stage: usize,
-        velocity_m_s: &[Vector<D>],
-    ) {
-        let axis = sums.axis;
-        self.add(sums, stage, |i| velocity_m_s[i][axis] - self.before[i]);
-        self.reset(axis, velocity_m_s);
+    pub(super) fn mark<const D: usize>(&mut self, stage: usize, velocity_m_s: &[Vector<D>]) {
+        let axis = self.sums.axis;
+        for (i, band) in self.bands.iter().enumerate() {
+            if let Some(b) = band {
+                self.sums.change_m_s[*b][stage] += velocity_m_s[i][axis] - self.before[i];
+            }
+        }
+        self.reset(velocity_m_s);
     }
 
-    pub(super) fn reset<const D: usize>(&mut self, axis: usize, velocity_m_s: &[Vector<D>]) {
+    pub(super) fn reset<const D: usize>(&mut self, velocity_m_s: &[Vector<D>]) {
+        let axis = self.sums.axis;
         for (b, v) in self.before.iter_mut().zip(velocity_m_s) {
             *b = v[axis];
         }
