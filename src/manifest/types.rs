@@ -345,6 +345,12 @@ pub struct Mps {
     /// Supporting walls (`wall_support`) are unknowns of it too. Unused by `standard`.
     #[serde(default)]
     pub exact_projection: bool,
+    /// Incremental scheme: the carried pressure's gradient with the coefficients of its fluid
+    /// neighbours changed by the least amount after which each row stays exact for a linear
+    /// pressure and the fluid's pressure forces on itself sum to zero (momentum conserved
+    /// off the lattice). Unused by `standard`.
+    #[serde(default)]
+    pub conservative_gradient: bool,
     /// Penalty r of Bingham's law with a rigid state, in Pa s: the viscous stage minimises
     /// the step's dissipation by an augmented Lagrangian (`src/mps/yield_solve.rs`), so that
     /// material whose stress stays below the yield stress has exactly zero strain rate,
@@ -471,6 +477,7 @@ impl Default for Mps {
             strain_rate_radius: None,
             viscous_laplacian_radius: None,
             exact_projection: false,
+            conservative_gradient: false,
             ppe_preconditioner: PpePreconditioner::default(),
             multigrid_over_correction: default_multigrid_over_correction(),
             yield_penalty_pa_s: 0.0,

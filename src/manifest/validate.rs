@@ -4,7 +4,7 @@
 //! finite (YAML `.nan` / `.inf` reach typed `f64` fields unchanged).
 
 pub use super::checker::{Checker, Issue, NON_NEGATIVE, POSITIVE, Range, between, fmt_num};
-use super::types::{Fluid, Manifest, SceneSection};
+use super::types::{Fluid, Manifest, PressureSchemeName, SceneSection};
 use crate::mps::kernel::first_shell_radius_limit;
 
 /// Most outputs of each kind (checkpoints, clouds, diagnostics rows) a run may ask for.
@@ -354,6 +354,13 @@ pub fn check<S: SceneSection>(m: &Manifest<S>) -> Vec<Issue> {
         c.fail(
             "mps.yield_penalty_adaptive",
             "needs mps.yield_penalty_pa_s > 0 (the penalty it starts from)".to_string(),
+        );
+    }
+    if p.conservative_gradient && p.pressure_scheme == PressureSchemeName::Standard {
+        c.fail(
+            "mps.conservative_gradient",
+            "needs mps.pressure_scheme: incremental (it changes the carried pressure's gradient)"
+                .to_string(),
         );
     }
     if p.yield_consistent_divergence && p.yield_penalty_pa_s == 0.0 {

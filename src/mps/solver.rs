@@ -28,6 +28,7 @@ use stage_momentum::StepProbe;
 pub use stage_momentum::{STAGE_NAMES, StageMomentum};
 use std::time::Instant;
 
+mod conservative;
 mod contact;
 mod exact;
 mod incremental;
@@ -116,6 +117,9 @@ pub struct SolverConfig<const D: usize> {
     /// divergence and gradient (exact projection, `solver/exact.rs`) instead of the MPS
     /// Laplacian model.
     pub exact_projection: bool,
+    /// Incremental scheme: the carried pressure's gradient with its fluid coefficients made
+    /// momentum-conserving (`solver/conservative.rs`).
+    pub conservative_gradient: bool,
     /// Aggregation multigrid instead of Jacobi as the PPE preconditioner.
     pub multigrid_ppe: bool,
     /// Factor on the multigrid cycle's coarse-grid corrections (1: plain aggregation).

@@ -118,6 +118,7 @@ impl<const D: usize> StrainOperator<D> {
             let mut own = Vector::<D>::zeros();
             let mut constant = Tensor::<D>::zeros();
             let mut geometry = consistent_divergence.map(|_| (Vec::new(), true));
+            // (pairs, whether every neighbour is an unknown without plane bits)
             for (e, r, r2, w) in weighted_neighbours(&p.position_m, nb, i, radius) {
                 let j = entry_index(e);
                 // M_i is symmetric: b^T = r^T M^-1 w / r^2.
@@ -144,7 +145,13 @@ impl<const D: usize> StrainOperator<D> {
                 // The free surface's rule (number density with the gradient's radius).
                 let density = number_density(&p.position_m, nb, i, refs.radius_n_m, |_| true);
                 let ratio = consistent_divergence.unwrap_or(1.0);
-                (pairs, all_unknown && density >= ratio * refs.n0)
+                let interior = all_unknown && density >= ratio * refs.n0;
+                let sum = if interior {
+                    ColumnSum::Zero
+                } else {
+                    ColumnSum::Free
+                };
+                (pairs, sum)
             });
             (entries, (constant + constant.transpose()) * 0.5, geometry)
         });
@@ -258,13 +265,36 @@ fn column_order(
 }
 
 /// One row of the strain operator as built: its entries (the last is the row's own), e0, and
-/// with the consistent divergence each unknown entry's (r_ij, w_ij / r_ij^2) and whether the
-/// row is interior.
-type Row<const D: usize> = (
+/// with the consistent divergence each unknown entry's (r_ij, w_ij / r_ij^2) and what
+/// [`make_divergence_consistent`] asks of the row's particle's column sum.
+pub(crate) type Row<const D: usize> = (
     Vec<(u32, Vector<D>)>,
     Tensor<D>,
-    Option<(Vec<(Vector<D>, f64)>, bool)>,
+    Option<(Vec<(Vector<D>, f64)>, ColumnSum<D>)>,
 );
+
+/// What [`make_divergence_consistent`] asks of one particle's column sum.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) enum ColumnSum<const D: usize> {
+    /// Left as built (a boundary particle whose sum is the boundary's force).
+    Free,
+    /// Zero (an interior particle).
+    Zero,
+    /// Zero across the unit normal n, free along it: a boundary particle whose force on the
+    /// rest must be the boundary's normal push.
+    Tangential(Vector<D>),
+}
+
+impl<const D: usize> ColumnSum<D> {
+    /// The part of v that the constraint holds to zero.
+    fn held(&self, v: Vector<D>) -> Vector<D> {
+        match self {
+            Self::Free => Vector::<D>::zeros(),
+            Self::Zero => v,
+            Self::Tangential(n) => v - n * n.dot(&v),
+        }
+    }
+}
 
 /// Most CG iterations of the correction in [`make_divergence_consistent`].
 const CONSISTENCY_MAX_ITERATIONS: u32 = 2000;
@@ -289,12 +319,16 @@ const CONSISTENCY_TOLERANCE: f64 = 1e-6;
 /// F_k = sum_e w_e (mu_c - mu_k) r_e^T M_k^-1, M_k = sum_e w_e r_e r_e^T: the weighted
 /// departure of mu from its linear fit at k. (b) is then S mu = -s (s the column sums), S
 /// symmetric positive definite, solved by Jacobi-preconditioned CG from 0 in every step.
-fn make_divergence_consistent<const D: usize>(per_row: &mut [Row<D>], n0: f64) -> SolveReport {
+pub(crate) fn make_divergence_consistent<const D: usize>(
+    per_row: &mut [Row<D>],
+    n0: f64,
+) -> SolveReport {
     let n = per_row.len();
-    let interior: Vec<bool> = per_row
+    let constraint: Vec<ColumnSum<D>> = per_row
         .iter()
-        .map(|row| row.2.as_ref().is_some_and(|g| g.1))
+        .map(|row| row.2.as_ref().map_or(ColumnSum::Free, |g| g.1))
         .collect();
+    let interior: Vec<bool> = constraint.iter().map(|c| *c != ColumnSum::Free).collect();
     // The unknown entries without plane bits: (row, column, position in the row, r, w).
     let mut entries: Vec<(u32, u32, u32, Vector<D>, f64)> = Vec::new();
     let mut row_start = Vec::with_capacity(n + 1);
@@ -327,13 +361,7 @@ fn make_divergence_consistent<const D: usize>(per_row: &mut [Row<D>], n0: f64) -
     for (index, &slot) in slot.iter().enumerate() {
         by_column[slot] = index as u32;
     }
-    let value = |mu: &[[f64; D]], c: usize| {
-        if interior[c] {
-            Vector::<D>::from(mu[c])
-        } else {
-            Vector::<D>::zeros()
-        }
-    };
+    let value = |mu: &[[f64; D]], c: usize| constraint[c].held(Vector::<D>::from(mu[c]));
     // db per entry for a given mu, row by row.
     let change = |mu: &[[f64; D]]| -> Vec<Vec<Vector<D>>> {
         map_particles(n, |k| {
@@ -361,7 +389,15 @@ fn make_divergence_consistent<const D: usize>(per_row: &mut [Row<D>], n0: f64) -
             for &e in &by_column[column_start[c]..column_start[c + 1]] {
                 column += flat(&db, e as usize);
             }
-            column.into()
+            match constraint[c] {
+                // Along a tangential constraint's normal mu is unused: the identity there
+                // keeps the system definite (its right-hand side is 0, so mu stays 0 there).
+                ColumnSum::Tangential(normal) => {
+                    let mu_c = Vector::<D>::from(mu[c]);
+                    (constraint[c].held(column) + normal * normal.dot(&mu_c)).into()
+                }
+                _ => column.into(),
+            }
         });
         out.copy_from_slice(&result);
     };
@@ -395,7 +431,7 @@ fn make_divergence_consistent<const D: usize>(per_row: &mut [Row<D>], n0: f64) -
     let rhs: Vec<[f64; D]> = (0..n)
         .map(|c| {
             if interior[c] {
-                (-sums[c]).into()
+                constraint[c].held(-sums[c]).into()
             } else {
                 [0.0; D]
             }

@@ -220,6 +220,7 @@ pub fn run_info(path: &Path, size_bytes: u64, run: &RunFile) -> RunInfo {
                 "strain_rate_radius",
                 "viscous_laplacian_radius",
                 "exact_projection",
+                "conservative_gradient",
                 "yield_penalty_pa_s",
                 "yield_max_iterations",
                 "yield_tolerance_1_s",

@@ -821,6 +821,7 @@ fn invalid_values_are_named_and_located() {
             "mps.wall_face_normals=false",
             "mps.quadratic_strain_rate=false",
             "mps.exact_projection=false",
+            "mps.conservative_gradient=false",
             "mps.particle_shifting=0",
             "mps.particle_shifting_limit=0.2",
             "mps.pressure_floor_pa=0",
@@ -835,6 +836,7 @@ fn invalid_values_are_named_and_located() {
         "mps.wall_surface_no_slip=true",
         "mps.quadratic_strain_rate=true",
         "mps.exact_projection=true",
+        "mps.conservative_gradient=true",
         "mps.pressure_smoothing_time_s=0.01",
     ] {
         let on = ok_with(MINIMAL, &["mps.pressure_scheme=incremental", on]);
@@ -850,6 +852,8 @@ fn invalid_values_are_named_and_located() {
         ok_with(MINIMAL, &surface).hash_hex,
         ok_with(MINIMAL, &faces).hash_hex
     );
+    let e = err_with(MINIMAL, &["mps.conservative_gradient=true"]);
+    assert_invalid(&e, "mps.conservative_gradient", None, &["incremental"]);
     let e = err_with(MINIMAL, &["mps.wall_face_normals=true"]);
     assert_invalid(&e, "mps.wall_face_normals", None, &["wall_surface_no_slip"]);
     let e = err_with(MINIMAL, &["mps.surface_depth=1.5"]);

@@ -28,6 +28,7 @@
 //! support (`wall_support_m`: walls that fluid comes closer to become unknowns of the
 //! increment, and that fluid's carried gradient sees them no lower than itself) and pair
 //! stabilisation (`pair_stabilisation_m`, in `solver.rs`).
+use super::conservative::row_gradient;
 use super::{PARTICLES_PER_TASK, ParticleKind, PressureScheme, SolveReport, Solver, StepError};
 use crate::mps::grid::entry_index;
 use crate::mps::kernel::weight;
@@ -71,6 +72,10 @@ impl<const D: usize> Solver<D> {
     pub(super) fn carried_pressure_acceleration(&self) -> Vec<Vector<D>> {
         debug_assert_eq!(self.config.pressure_scheme, PressureScheme::Incremental);
         let corrections = self.gradient_corrections();
+        let conservative = self
+            .config
+            .conservative_gradient
+            .then(|| self.conservative_gradient_rows(&corrections, &self.number_density()));
         let p = &self.particles;
         let nb = &self.pairs.near;
         let rho = self.config.density_kg_m3;
@@ -102,13 +107,19 @@ impl<const D: usize> Solver<D> {
                 self.refs.radius_n_m,
                 &corrections[i],
                 |j, r| {
-                    if p.kind[j] == ParticleKind::Fluid {
-                        p.pressure_pa[j] - pi
-                    } else {
+                    if p.kind[j] != ParticleKind::Fluid {
                         wall_base() + rho_g.dot(r)
+                    } else if conservative.is_some() {
+                        0.0
+                    } else {
+                        p.pressure_pa[j] - pi
                     }
                 },
             );
+            let g = match &conservative {
+                Some(rows) => g + row_gradient(&rows[i], &p.pressure_pa),
+                None => g,
+            };
             (g + self.regularisation(i, pi)) * (-1.0 / rho)
         })
     }
