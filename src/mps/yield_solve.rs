@@ -117,8 +117,8 @@ impl<const D: usize> StrainOperator<D> {
             let mut entries = Vec::new();
             let mut own = Vector::<D>::zeros();
             let mut constant = Tensor::<D>::zeros();
-            let mut geometry = consistent_divergence.map(|_| (Vec::new(), true));
             // (pairs, whether every neighbour is an unknown without plane bits)
+            let mut geometry = consistent_divergence.map(|_| (Vec::new(), true));
             for (e, r, r2, w) in weighted_neighbours(&p.position_m, nb, i, radius) {
                 let j = entry_index(e);
                 // M_i is symmetric: b^T = r^T M^-1 w / r^2.
@@ -264,7 +264,8 @@ fn column_order(
     (starts, slot)
 }
 
-/// One row of the strain operator as built: its entries (the last is the row's own), e0, and
+/// One row of the strain operator (or of the carried pressure's gradient,
+/// `solver/conservative.rs`) as built: its entries (the last is the row's own), e0, and
 /// with the consistent divergence each unknown entry's (r_ij, w_ij / r_ij^2) and what
 /// [`make_divergence_consistent`] asks of the row's particle's column sum.
 pub(crate) type Row<const D: usize> = (
@@ -306,7 +307,8 @@ const CONSISTENCY_TOLERANCE: f64 = 1e-6;
 
 /// The smallest change db_ij to the unknown entries (weighted by r_ij^2 / w_ij) after which
 /// (a) every row stays first-order exact, sum_j r_ij db_ij^T = 0, and (b) every interior
-/// particle c has a zero column sum, sum_i b_ic + own_c = 0: E^T of a uniform lambda is then 0
+/// particle c ([`ColumnSum::Zero`]) has a zero column sum, sum_i b_ic + own_c = 0 (a
+/// [`ColumnSum::Tangential`] one, zero across its normal): E^T of a uniform lambda is then 0
 /// there, as the continuous divergence of a uniform stress is, where the corrected gradient's
 /// adjoint leaves lambda / l0 times the disorder (docs/validation.md, "A divergence consistent
 /// for a uniform stress"). Entries through a mirror plane are left as built (their particles
