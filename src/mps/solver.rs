@@ -573,6 +573,7 @@ impl<const D: usize> Solver<D> {
             }
         }
 
+        self.check_prediction()?;
         // (7) Neighbours at the predicted positions, used by every later stage of the step.
         self.rebuild_neighbours();
         self.collide(dt_s, false);

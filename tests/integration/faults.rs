@@ -219,3 +219,44 @@ fn non_finite_state_fails_the_run_at_its_first_step() {
     );
     assert_eq!(run.states[0].step, 0);
 }
+
+/// A step that blows up within itself (a carried pressure of 1e100 Pa at one particle, which
+/// the prediction turns into a velocity of about 1e96 m/s; 1e150 Pa overflows the viscous
+/// solve's sums, which stop on it) must stop at its predicted state. The neighbour search
+/// that follows would sort positions of 1e93 m into cells: a 3D run
+/// under `mps.conservative_gradient` panicked there ("capacity overflow") and left only its
+/// `.partial` file.
+#[test]
+fn a_blow_up_within_a_step_fails_the_run_before_its_neighbour_search() {
+    let dir = tempfile::tempdir().unwrap();
+    let resolved = load(&common::experiment("smoke_2d.yaml"), &[]).unwrap();
+    let m = &resolved.manifest;
+    let scene = build_scene::<2>(m);
+    let config = solver_config(m, &scene);
+    let mut solver = Solver::new(config, scene.particles);
+    let fluid = (0..solver.particles.len())
+        .filter(|&i| solver.particles.kind[i] == ParticleKind::Fluid)
+        .nth(40)
+        .unwrap();
+    solver.particles.pressure_pa[fluid] = 1e100;
+    let path = dir.path().join("blown.mcap");
+    let mut recorder = Recorder::create(&path, &run_header(&resolved, 1)).unwrap();
+    let end = time_loop(
+        m,
+        &resolved.hash_hex,
+        &mut solver,
+        LoopStart::default(),
+        &LoopControl::default(),
+        &mut recorder,
+    )
+    .unwrap();
+    let Outcome::Failed(reason) = &end.outcome else {
+        panic!("{:?}", end.outcome)
+    };
+    assert!(reason.contains("exceeds stop.max_speed_m_s"), "{reason}");
+    assert_eq!(solver.step, 0, "stopped in the first step");
+    recorder
+        .finish(time_ns(solver.time_s), &end.summary, &end.outcome)
+        .unwrap();
+    assert_eq!(read_run(&path).unwrap().summary.unwrap().outcome, "failed");
+}

@@ -56,6 +56,43 @@ impl<const D: usize> Solver<D> {
         }
     }
 
+    /// Why fluid particle i stops the run, if it does: a position or velocity that is not
+    /// finite, or a speed above `stop.max_speed_m_s`.
+    fn blown_up(&self, i: usize) -> Option<StepError> {
+        let p = &self.particles;
+        let (x, v) = (p.position_m[i], p.velocity_m_s[i]);
+        if p.kind[i] != ParticleKind::Fluid {
+            return None;
+        }
+        if !x.iter().chain(v.iter()).all(|a| a.is_finite()) {
+            return Some(StepError::NonFinite {
+                particle: i,
+                step: self.step,
+            });
+        }
+        let speed = v.norm();
+        (speed > self.config.max_speed_m_s).then_some(StepError::TooFast {
+            particle: i,
+            speed_m_s: speed,
+            limit_m_s: self.config.max_speed_m_s,
+            step: self.step,
+        })
+    }
+
+    /// The blow-up guards at the predicted state, before the neighbour search sorts its
+    /// positions into cells: a prediction blown up to 1e290 m would ask that search for more
+    /// cells than memory holds (a 3D run under `mps.conservative_gradient` panicked so).
+    pub(super) fn check_prediction(&self) -> Result<(), StepError> {
+        let first = (0..self.particles.len())
+            .into_par_iter()
+            .with_min_len(PARTICLES_PER_TASK)
+            .find_first(|&i| self.blown_up(i).is_some());
+        match first.and_then(|i| self.blown_up(i)) {
+            Some(error) => Err(error),
+            None => Ok(()),
+        }
+    }
+
     /// Blow-up guards after a step (finite state, speed limit); fluid that left the domain
     /// box becomes a ghost, at rest where it left.
     pub(super) fn check_state(&mut self) -> Result<(), StepError> {
@@ -67,31 +104,18 @@ impl<const D: usize> Solver<D> {
             .into_par_iter()
             .with_min_len(PARTICLES_PER_TASK)
             .filter(|&i| {
-                let (x, v) = (p.position_m[i], p.velocity_m_s[i]);
-                p.kind[i] == ParticleKind::Fluid
-                    && (!x.iter().chain(v.iter()).all(|a| a.is_finite())
-                        || v.norm() > c.max_speed_m_s
-                        || (0..D).any(|a| x[a] < c.domain_min_m[a] || x[a] > c.domain_max_m[a]))
+                let x = p.position_m[i];
+                self.blown_up(i).is_some()
+                    || (p.kind[i] == ParticleKind::Fluid
+                        && (0..D).any(|a| x[a] < c.domain_min_m[a] || x[a] > c.domain_max_m[a]))
             })
             .collect();
-        let p = &mut self.particles;
         for i in flagged {
-            let (x, v) = (p.position_m[i], p.velocity_m_s[i]);
-            if !x.iter().chain(v.iter()).all(|a| a.is_finite()) {
-                return Err(StepError::NonFinite {
-                    particle: i,
-                    step: self.step,
-                });
+            if let Some(error) = self.blown_up(i) {
+                return Err(error);
             }
-            let speed = v.norm();
-            if speed > c.max_speed_m_s {
-                return Err(StepError::TooFast {
-                    particle: i,
-                    speed_m_s: speed,
-                    limit_m_s: c.max_speed_m_s,
-                    step: self.step,
-                });
-            }
+            let p = &mut self.particles;
+            let x = p.position_m[i];
             if (0..D).any(|a| x[a] < c.domain_min_m[a] || x[a] > c.domain_max_m[a]) {
                 p.kind[i] = ParticleKind::Ghost;
                 self.listed_at_m.clear();
