@@ -330,7 +330,7 @@ pub(crate) fn make_divergence_consistent<const D: usize>(
         .iter()
         .map(|row| row.2.as_ref().map_or(ColumnSum::Free, |g| g.1))
         .collect();
-    let interior: Vec<bool> = constraint.iter().map(|c| *c != ColumnSum::Free).collect();
+    let interior = |c: usize| constraint[c] != ColumnSum::Free;
     // The unknown entries without plane bits: (row, column, position in the row, r, w).
     let mut entries: Vec<(u32, u32, u32, Vector<D>, f64)> = Vec::new();
     let mut row_start = Vec::with_capacity(n + 1);
@@ -363,33 +363,35 @@ pub(crate) fn make_divergence_consistent<const D: usize>(
     for (index, &slot) in slot.iter().enumerate() {
         by_column[slot] = index as u32;
     }
-    let value = |mu: &[[f64; D]], c: usize| constraint[c].held(Vector::<D>::from(mu[c]));
-    // db per entry for a given mu, row by row.
-    let change = |mu: &[[f64; D]]| -> Vec<Vec<Vector<D>>> {
-        map_particles(n, |k| {
-            let own = value(mu, k);
-            let list = &entries[row_start[k]..row_start[k + 1]];
-            let fit = list.iter().fold(Tensor::<D>::zeros(), |g, e| {
-                g + (value(mu, e.1 as usize) - own) * e.3.transpose() * e.4
-            }) * inverse_moments[k];
-            list.iter()
-                .map(|e| (value(mu, e.1 as usize) - own - fit * e.3) * e.4)
-                .collect()
+    // db per entry for a given mu, in entry order (rows in turn): each row's linear fit of
+    // the held multipliers first, then every entry's change from it.
+    let change = |mu: &[[f64; D]]| -> Vec<Vector<D>> {
+        let held: Vec<Vector<D>> =
+            map_particles(n, |c| constraint[c].held(Vector::<D>::from(mu[c])));
+        let fit: Vec<Tensor<D>> = map_particles(n, |k| {
+            entries[row_start[k]..row_start[k + 1]]
+                .iter()
+                .fold(Tensor::<D>::zeros(), |g, e| {
+                    g + (held[e.1 as usize] - held[k]) * e.3.transpose() * e.4
+                })
+                * inverse_moments[k]
+        });
+        map_particles(entries.len(), |e| {
+            let (k, c, _, r, w) = entries[e];
+            (held[c as usize] - held[k as usize] - fit[k as usize] * r) * w
         })
-    };
-    let flat = |db: &[Vec<Vector<D>>], e: usize| {
-        let k = entries[e].0 as usize;
-        db[k][e - row_start[k]]
     };
     let apply = |mu: &[[f64; D]], out: &mut [[f64; D]]| {
         let db = change(mu);
         let result: Vec<[f64; D]> = map_particles(n, |c| {
-            if !interior[c] {
+            if !interior(c) {
                 return mu[c];
             }
-            let mut column = -db[c].iter().fold(Vector::<D>::zeros(), |a, d| a + d);
+            let mut column = -db[row_start[c]..row_start[c + 1]]
+                .iter()
+                .fold(Vector::<D>::zeros(), |a, d| a + d);
             for &e in &by_column[column_start[c]..column_start[c + 1]] {
-                column += flat(&db, e as usize);
+                column += db[e as usize];
             }
             match constraint[c] {
                 // Along a tangential constraint's normal mu is unused: the identity there
@@ -405,7 +407,7 @@ pub(crate) fn make_divergence_consistent<const D: usize>(
     };
     // Jacobi: the weights mu_c meets, through its own row and its column.
     let inv_diag: Vec<[f64; D]> = map_particles(n, |c| {
-        let d: f64 = if interior[c] {
+        let d: f64 = if interior(c) {
             entries[row_start[c]..row_start[c + 1]]
                 .iter()
                 .map(|e| e.4)
@@ -432,7 +434,7 @@ pub(crate) fn make_divergence_consistent<const D: usize>(
     }
     let rhs: Vec<[f64; D]> = (0..n)
         .map(|c| {
-            if interior[c] {
+            if interior(c) {
                 constraint[c].held(-sums[c]).into()
             } else {
                 [0.0; D]
@@ -450,8 +452,7 @@ pub(crate) fn make_divergence_consistent<const D: usize>(
         CONSISTENCY_MAX_ITERATIONS,
     );
     let db = change(&mu);
-    for (e, entry) in entries.iter().enumerate() {
-        let d = flat(&db, e);
+    for (entry, &d) in entries.iter().zip(&db) {
         let row = &mut per_row[entry.0 as usize].0;
         row[entry.2 as usize].1 += d;
         let last = row.len() - 1;
