@@ -173,22 +173,18 @@ fn fluid_leaving_the_domain_beyond_the_limit_fails_the_run() {
     assert!(run.summary.unwrap().metrics["ghost_particle_count"] > 3.0);
 }
 
-/// A NaN cannot be typed into a manifest (validation refuses it), so it is put into the state
-/// of a real run before its time loop: the first step must stop on it, and say so (it used
-/// to read "viscosity solve did not converge: relative residual 0 after 0 iterations").
-#[test]
-fn non_finite_state_fails_the_run_at_its_first_step() {
+/// Runs smoke_2d with its state changed by `alter` before the time loop, and checks that the
+/// first step stops with a reason containing `reason` and that the finished file says
+/// `failed` and keeps only the t = 0 checkpoint, none of the failed step.
+fn fails_at_the_first_step(alter: impl FnOnce(&mut Solver<2>), reason: &str) {
     let dir = tempfile::tempdir().unwrap();
     let resolved = load(&common::experiment("smoke_2d.yaml"), &[]).unwrap();
     let m = &resolved.manifest;
     let scene = build_scene::<2>(m);
     let config = solver_config(m, &scene);
     let mut solver = Solver::new(config, scene.particles);
-    let fluid = (0..solver.particles.len())
-        .find(|&i| solver.particles.kind[i] == ParticleKind::Fluid)
-        .unwrap();
-    solver.particles.velocity_m_s[fluid][1] = f64::NAN;
-    let path = dir.path().join("nan.mcap");
+    alter(&mut solver);
+    let path = dir.path().join("altered.mcap");
     let mut recorder = Recorder::create(&path, &run_header(&resolved, 1)).unwrap();
     let end = time_loop(
         m,
@@ -199,13 +195,10 @@ fn non_finite_state_fails_the_run_at_its_first_step() {
         &mut recorder,
     )
     .unwrap();
-    let Outcome::Failed(reason) = &end.outcome else {
+    let Outcome::Failed(said) = &end.outcome else {
         panic!("{:?}", end.outcome)
     };
-    assert!(
-        reason.contains("viscosity solve met a non-finite value"),
-        "{reason}"
-    );
+    assert!(said.contains(reason), "{said}");
     assert_eq!(solver.step, 0, "stopped in the first step");
     recorder
         .finish(time_ns(solver.time_s), &end.summary, &end.outcome)
@@ -220,43 +213,41 @@ fn non_finite_state_fails_the_run_at_its_first_step() {
     assert_eq!(run.states[0].step, 0);
 }
 
+/// The index of smoke_2d's fluid particle `nth` (in index order).
+fn fluid_particle(solver: &Solver<2>, nth: usize) -> usize {
+    (0..solver.particles.len())
+        .filter(|&i| solver.particles.kind[i] == ParticleKind::Fluid)
+        .nth(nth)
+        .unwrap()
+}
+
+/// A NaN cannot be typed into a manifest (validation refuses it), so it is put into the state
+/// of a real run before its time loop: the first step must stop on it, and say so (it used
+/// to read "viscosity solve did not converge: relative residual 0 after 0 iterations").
+#[test]
+fn non_finite_state_fails_the_run_at_its_first_step() {
+    fails_at_the_first_step(
+        |solver| {
+            let fluid = fluid_particle(solver, 0);
+            solver.particles.velocity_m_s[fluid][1] = f64::NAN;
+        },
+        "viscosity solve met a non-finite value",
+    );
+}
+
 /// A step that blows up within itself (a carried pressure of 1e100 Pa at one particle, which
 /// the prediction turns into a velocity of about 1e96 m/s; 1e150 Pa overflows the viscous
 /// solve's sums, which stop on it) must stop at its predicted state. The neighbour search
-/// that follows would sort positions of 1e93 m into cells: a 3D run
-/// under `mps.conservative_gradient` panicked there ("capacity overflow") and left only its
+/// that follows would sort positions of 1e93 m into cells: a 3D run under
+/// `mps.conservative_gradient` panicked there ("capacity overflow") and left only its
 /// `.partial` file.
 #[test]
 fn a_blow_up_within_a_step_fails_the_run_before_its_neighbour_search() {
-    let dir = tempfile::tempdir().unwrap();
-    let resolved = load(&common::experiment("smoke_2d.yaml"), &[]).unwrap();
-    let m = &resolved.manifest;
-    let scene = build_scene::<2>(m);
-    let config = solver_config(m, &scene);
-    let mut solver = Solver::new(config, scene.particles);
-    let fluid = (0..solver.particles.len())
-        .filter(|&i| solver.particles.kind[i] == ParticleKind::Fluid)
-        .nth(40)
-        .unwrap();
-    solver.particles.pressure_pa[fluid] = 1e100;
-    let path = dir.path().join("blown.mcap");
-    let mut recorder = Recorder::create(&path, &run_header(&resolved, 1)).unwrap();
-    let end = time_loop(
-        m,
-        &resolved.hash_hex,
-        &mut solver,
-        LoopStart::default(),
-        &LoopControl::default(),
-        &mut recorder,
-    )
-    .unwrap();
-    let Outcome::Failed(reason) = &end.outcome else {
-        panic!("{:?}", end.outcome)
-    };
-    assert!(reason.contains("exceeds stop.max_speed_m_s"), "{reason}");
-    assert_eq!(solver.step, 0, "stopped in the first step");
-    recorder
-        .finish(time_ns(solver.time_s), &end.summary, &end.outcome)
-        .unwrap();
-    assert_eq!(read_run(&path).unwrap().summary.unwrap().outcome, "failed");
+    fails_at_the_first_step(
+        |solver| {
+            let fluid = fluid_particle(solver, 40);
+            solver.particles.pressure_pa[fluid] = 1e100;
+        },
+        "exceeds stop.max_speed_m_s",
+    );
 }
