@@ -80,8 +80,8 @@ impl<const D: usize> Solver<D> {
     }
 
     /// The blow-up guards at the predicted state, before the neighbour search sorts its
-    /// positions into cells: a prediction blown up to 1e290 m would ask that search for more
-    /// cells than memory holds (a 3D run under `mps.conservative_gradient` panicked so).
+    /// positions into cells: the cell count of a prediction blown up to 1e93 m overflows
+    /// (a 3D run under `mps.conservative_gradient` panicked so).
     pub(super) fn check_prediction(&self) -> Result<(), StepError> {
         let first = (0..self.particles.len())
             .into_par_iter()
