@@ -86,8 +86,8 @@ impl<const D: usize> Solver<D> {
         let first = (0..self.particles.len())
             .into_par_iter()
             .with_min_len(PARTICLES_PER_TASK)
-            .find_first(|&i| self.blown_up(i).is_some());
-        match first.and_then(|i| self.blown_up(i)) {
+            .find_map_first(|i| self.blown_up(i));
+        match first {
             Some(error) => Err(error),
             None => Ok(()),
         }
