@@ -603,17 +603,22 @@ pub fn require_3d(m: &Manifest, c: &mut Checker, kind: &str, why: &str) {
 }
 
 /// Fails `field` (a scene's switch to mirror symmetry planes, when on) if the manifest asks
-/// for the exact projection, whose gradient rows have no mirror images.
+/// for the exact or the adjoint projection, whose gradient rows have no mirror images.
 pub fn refuse_planes_without_images(m: &Manifest, c: &mut Checker, field: &str, on: bool) {
-    if on
-        && m.mps.exact_projection
-        && m.mps.pressure_scheme != crate::manifest::PressureSchemeName::Standard
-    {
-        c.fail(
-            field,
-            "is not available with mps.exact_projection (its gradient rows have no mirror images)"
-                .into(),
-        );
+    if on && m.mps.pressure_scheme != crate::manifest::PressureSchemeName::Standard {
+        for (set, name) in [
+            (m.mps.exact_projection, "mps.exact_projection"),
+            (m.mps.adjoint_projection, "mps.adjoint_projection"),
+        ] {
+            if set {
+                c.fail(
+                    field,
+                    format!(
+                        "is not available with {name} (its gradient rows have no mirror images)"
+                    ),
+                );
+            }
+        }
     }
 }
 

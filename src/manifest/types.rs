@@ -351,6 +351,13 @@ pub struct Mps {
     /// off the lattice). Unused by `standard`.
     #[serde(default)]
     pub conservative_gradient: bool,
+    /// Incremental scheme, experimental: the increment's equation is G^T G dp = (rho/dt)
+    /// G^T u* with G the correction's own gradient rows (the carried gradient's rows under
+    /// `conservative_gradient`) and G^T the divergence adjoint to it, so the projection is
+    /// orthogonal: it removes kinetic energy and never adds any. Not with `exact_projection`.
+    /// Unused by `standard`.
+    #[serde(default)]
+    pub adjoint_projection: bool,
     /// Penalty r of Bingham's law with a rigid state, in Pa s: the viscous stage minimises
     /// the step's dissipation by an augmented Lagrangian (`src/mps/yield_solve.rs`), so that
     /// material whose stress stays below the yield stress has exactly zero strain rate,
@@ -478,6 +485,7 @@ impl Default for Mps {
             viscous_laplacian_radius: None,
             exact_projection: false,
             conservative_gradient: false,
+            adjoint_projection: false,
             ppe_preconditioner: PpePreconditioner::default(),
             multigrid_over_correction: default_multigrid_over_correction(),
             yield_penalty_pa_s: 0.0,

@@ -363,6 +363,20 @@ pub fn check<S: SceneSection>(m: &Manifest<S>) -> Vec<Issue> {
                 .to_string(),
         );
     }
+    if p.adjoint_projection && p.pressure_scheme == PressureSchemeName::Standard {
+        c.fail(
+            "mps.adjoint_projection",
+            "needs mps.pressure_scheme: incremental (it changes the increment's equation)"
+                .to_string(),
+        );
+    }
+    if p.adjoint_projection && p.exact_projection {
+        c.fail(
+            "mps.adjoint_projection",
+            "cannot be combined with mps.exact_projection (each builds the increment's equation)"
+                .to_string(),
+        );
+    }
     if p.yield_consistent_divergence && p.yield_penalty_pa_s == 0.0 {
         c.fail(
             "mps.yield_consistent_divergence",

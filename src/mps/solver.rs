@@ -120,6 +120,10 @@ pub struct SolverConfig<const D: usize> {
     /// Incremental scheme: the carried pressure's gradient with its fluid coefficients made
     /// momentum-conserving (`solver/conservative.rs`).
     pub conservative_gradient: bool,
+    /// Incremental scheme: the increment's equation is G^T G with the correction's gradient
+    /// rows G (the carried gradient's under `conservative_gradient`): an orthogonal
+    /// projection (`solver/exact.rs`).
+    pub adjoint_projection: bool,
     /// Aggregation multigrid instead of Jacobi as the PPE preconditioner.
     pub multigrid_ppe: bool,
     /// Factor on the multigrid cycle's coarse-grid corrections (1: plain aggregation).

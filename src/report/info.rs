@@ -221,6 +221,7 @@ pub fn run_info(path: &Path, size_bytes: u64, run: &RunFile) -> RunInfo {
                 "viscous_laplacian_radius",
                 "exact_projection",
                 "conservative_gradient",
+                "adjoint_projection",
                 "yield_penalty_pa_s",
                 "yield_max_iterations",
                 "yield_tolerance_1_s",

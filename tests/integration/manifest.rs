@@ -822,6 +822,7 @@ fn invalid_values_are_named_and_located() {
             "mps.quadratic_strain_rate=false",
             "mps.exact_projection=false",
             "mps.conservative_gradient=false",
+            "mps.adjoint_projection=false",
             "mps.particle_shifting=0",
             "mps.particle_shifting_limit=0.2",
             "mps.pressure_floor_pa=0",
@@ -837,6 +838,7 @@ fn invalid_values_are_named_and_located() {
         "mps.quadratic_strain_rate=true",
         "mps.exact_projection=true",
         "mps.conservative_gradient=true",
+        "mps.adjoint_projection=true",
         "mps.pressure_smoothing_time_s=0.01",
     ] {
         let on = ok_with(MINIMAL, &["mps.pressure_scheme=incremental", on]);
@@ -854,6 +856,17 @@ fn invalid_values_are_named_and_located() {
     );
     let e = err_with(MINIMAL, &["mps.conservative_gradient=true"]);
     assert_invalid(&e, "mps.conservative_gradient", None, &["incremental"]);
+    let e = err_with(MINIMAL, &["mps.adjoint_projection=true"]);
+    assert_invalid(&e, "mps.adjoint_projection", None, &["incremental"]);
+    let e = err_with(
+        MINIMAL,
+        &[
+            "mps.pressure_scheme=incremental",
+            "mps.adjoint_projection=true",
+            "mps.exact_projection=true",
+        ],
+    );
+    assert_invalid(&e, "mps.adjoint_projection", None, &["exact_projection"]);
     let e = err_with(MINIMAL, &["mps.wall_face_normals=true"]);
     assert_invalid(&e, "mps.wall_face_normals", None, &["wall_surface_no_slip"]);
     let e = err_with(MINIMAL, &["mps.surface_depth=1.5"]);

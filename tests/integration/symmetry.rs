@@ -146,20 +146,26 @@ fn quarter_slump_replays_on_one_thread() {
     common::assert_replays(&result.path, Some(2));
 }
 
-/// The exact projection has no mirror images: the manifest says so, naming the field.
+/// The exact and the adjoint projections have no mirror images: the manifest says so,
+/// naming the field and the projection.
 #[test]
 fn quarter_with_the_exact_projection_is_refused() {
-    let err = mps_runner::experiment::load(
-        &common::experiment("slump_3d.yaml"),
-        &[
-            "scene.quarter_domain=true".to_string(),
-            "mps.pressure_scheme=incremental".to_string(),
-            "mps.exact_projection=true".to_string(),
-        ],
-    )
-    .unwrap_err()
-    .to_string();
-    assert!(err.contains("scene.quarter_domain"), "{err}");
+    for projection in ["exact_projection", "adjoint_projection"] {
+        let err = mps_runner::experiment::load(
+            &common::experiment("slump_3d.yaml"),
+            &[
+                "scene.quarter_domain=true".to_string(),
+                "mps.pressure_scheme=incremental".to_string(),
+                format!("mps.{projection}=true"),
+            ],
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            err.contains("scene.quarter_domain") && err.contains(projection),
+            "{err}"
+        );
+    }
 }
 
 /// Fluid positions of a run's last checkpoint.

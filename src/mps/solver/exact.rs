@@ -42,6 +42,7 @@ impl<const D: usize> Solver<D> {
         &self,
         corrections: &[SMatrix<f64, D, D>],
         support: &[bool],
+        conservative: Option<&super::conservative::GradientRows<D>>,
     ) -> Vec<GradientRow<D>> {
         let p = &self.particles;
         let nb = &self.pairs.near;
@@ -66,8 +67,10 @@ impl<const D: usize> Solver<D> {
                 let e = r * (w / r2);
                 if p.kind[entry_index(j)] == ParticleKind::Fluid || support[entry_index(j)] {
                     let ce = c * e;
-                    entries.push((j, ce));
-                    own -= ce;
+                    if conservative.is_none() || support[entry_index(j)] {
+                        entries.push((j, ce));
+                        own -= ce;
+                    }
                     if p.kind[entry_index(j)] == ParticleKind::Fluid {
                         fluid_weights.push((j, w));
                         weight_sum += w;
@@ -84,6 +87,9 @@ impl<const D: usize> Solver<D> {
                 own -= ce;
             }
             entries.push((i as u32, own));
+            if let Some(rows) = conservative {
+                entries.extend(rows[i].iter().map(|&(e, a)| (entry_index(e) as u32, a)));
+            }
             merged(entries)
         })
     }
@@ -146,5 +152,61 @@ impl<const D: usize> Solver<D> {
             }
             (diag, known_sum)
         })
+    }
+}
+
+impl<const D: usize> Solver<D> {
+    /// G^T G over the unknowns `rows` (`unknown_of` their row), summed over every fluid
+    /// particle's gradient row, plus the artificial compressibility on the diagonal; with
+    /// G^T u* per row (G^T the divergence adjoint to G, up to its sign: -div). The
+    /// correction u* - (dt/rho) G dp then has G^T u = 0 and is the orthogonal projection
+    /// of u*: it removes kinetic energy and never adds any. Known columns (surface
+    /// particles) are summed against `known` into the second vector. Symmetric positive
+    /// definite with the surface's known columns or the compressibility: plain CG.
+    pub(super) fn adjoint_ppe(
+        &self,
+        dt_s: f64,
+        rows: &[usize],
+        unknown_of: &[u32],
+        gradient: &[GradientRow<D>],
+        known: &[f64],
+    ) -> (CsrMatrix, Vec<f64>, Vec<f64>) {
+        let p = &self.particles;
+        let diag_extra =
+            self.config.density_kg_m3 * self.config.compressibility_1_pa / (dt_s * dt_s);
+        // G^T: per column c, its (fluid row i, g_ic) in ascending i.
+        let mut transpose: Vec<Vec<(u32, Vector<D>)>> = vec![Vec::new(); p.len()];
+        for (i, row) in gradient.iter().enumerate() {
+            for &(c, g) in row {
+                transpose[c as usize].push((i as u32, g));
+            }
+        }
+        let (matrix, sums) = CsrMatrix::assemble(rows.len(), |k, columns, values| {
+            let c = rows[k];
+            let mut entries: Vec<(u32, f64)> = Vec::new();
+            let mut adjoint_divergence = 0.0;
+            for &(i, g_ic) in &transpose[c] {
+                adjoint_divergence += g_ic.dot(&p.velocity_m_s[i as usize]);
+                for &(l, g_il) in &gradient[i as usize] {
+                    entries.push((l, g_ic.dot(&g_il)));
+                }
+            }
+            let mut diag = diag_extra;
+            let mut known_sum = 0.0;
+            for (col, v) in merged(entries) {
+                let col = col as usize;
+                if col == c {
+                    diag += v;
+                } else if unknown_of[col] != u32::MAX {
+                    columns.push(unknown_of[col]);
+                    values.push(v);
+                } else {
+                    known_sum -= v * known[col];
+                }
+            }
+            (diag, (known_sum, adjoint_divergence))
+        });
+        let (known_sums, divergence) = sums.into_iter().unzip();
+        (matrix, known_sums, divergence)
     }
 }

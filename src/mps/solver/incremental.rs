@@ -168,26 +168,36 @@ impl<const D: usize> Solver<D> {
         // none), plus the relaxed compression term.
         let compression_scale = c.compression_relaxation * rho / (dt_s * dt_s);
         let near = &self.pairs.near;
-        let source: Vec<f64> = rows
-            .par_iter()
-            .with_min_len(PARTICLES_PER_TASK)
-            .with_max_len(PARTICLES_PER_TASK)
-            .map(|&i| {
-                let ui = p.velocity_m_s[i];
-                let div = divergence(&p.position_m, near, i, refs.radius_n_m, refs.n0, |e| {
-                    near.reflect(e, p.velocity_m_s[entry_index(e)]) - ui
-                });
-                if !is_fluid(i) {
-                    return -rho / dt_s * div;
-                }
-                let compression = (number_density[i] - refs.n0).max(0.0) / refs.n0;
-                -rho / dt_s * div + compression_scale * compression
-            })
-            .collect();
-        // Exact projection: -D G with the correction's own gradient (`exact.rs`).
-        let gradient = c
-            .exact_projection
-            .then(|| self.gradient_rows(&corrections, &support));
+        let compression =
+            |i: usize| compression_scale * ((number_density[i] - refs.n0).max(0.0) / refs.n0);
+        // Under the adjoint projection the source comes with its matrix (below).
+        let adjoint = c.adjoint_projection;
+        let mut source: Vec<f64> = if adjoint {
+            Vec::new()
+        } else {
+            rows.par_iter()
+                .with_min_len(PARTICLES_PER_TASK)
+                .with_max_len(PARTICLES_PER_TASK)
+                .map(|&i| {
+                    let ui = p.velocity_m_s[i];
+                    let div = divergence(&p.position_m, near, i, refs.radius_n_m, refs.n0, |e| {
+                        near.reflect(e, p.velocity_m_s[entry_index(e)]) - ui
+                    });
+                    if !is_fluid(i) {
+                        return -rho / dt_s * div;
+                    }
+                    -rho / dt_s * div + compression(i)
+                })
+                .collect()
+        };
+        // Exact projection: -D G with the correction's own gradient (`exact.rs`). Adjoint
+        // projection: G^T G with the same rows, the carried gradient's conservative ones under
+        // `conservative_gradient` (the projection then pushes as the prediction does).
+        let gradient = (c.exact_projection || adjoint).then(|| {
+            let conservative = (adjoint && c.conservative_gradient)
+                .then(|| self.conservative_gradient_rows(&corrections, &number_density));
+            self.gradient_rows(&corrections, &support, conservative.as_ref())
+        });
         // -lap(dp) over fluid neighbours and supporting walls: any other wall's increment
         // mirrors the particle's, so its term vanishes.
         // The known increments: p_s - p^n on the surface (-p^n as it stands when the surface
@@ -202,6 +212,20 @@ impl<const D: usize> Solver<D> {
             })
             .collect();
         let (matrix, known) = match &gradient {
+            Some(gradient) if adjoint => {
+                let (matrix, known, divergence) =
+                    self.adjoint_ppe(dt_s, &rows, &unknown_of, gradient, &known);
+                // -rho/dt div(u*) with div = -G^T.
+                source = rows
+                    .iter()
+                    .zip(&divergence)
+                    .map(|(&i, d)| {
+                        let s = rho / dt_s * d;
+                        if is_fluid(i) { s + compression(i) } else { s }
+                    })
+                    .collect();
+                (matrix, known)
+            }
             Some(gradient) => self.exact_ppe(dt_s, &rows, &unknown_of, gradient, &known),
             None => self.assemble_ppe(
                 dt_s,
@@ -215,7 +239,7 @@ impl<const D: usize> Solver<D> {
         // The increment is small once the carried pressure has settled: start from zero.
         let mut solution = vec![0.0; rows.len()];
         let solve_started = Instant::now();
-        let ppe = if gradient.is_some() {
+        let ppe = if gradient.is_some() && !adjoint {
             solve_bicgstab(
                 &matrix,
                 &rhs,
