@@ -5,6 +5,11 @@
 //! projection I - G (D G)^-1 D is idempotent, so no disturbance can grow through it, whatever
 //! the walls' treatment (Cummins & Rudman 1999 discuss exact against approximate projection
 //! in SPH). The price: A spans two rings of neighbours and is not symmetric (BiCGStab).
+//!
+//! The adjoint projection (`adjoint_projection`, experimental) takes the same rows G with
+//! the divergence adjoint to them, A = G^T G: symmetric, and the projection orthogonal. With
+//! non-conservative rows G^T does not vanish on a rigid translation off the lattice, so it
+//! goes with the conservative gradient (docs/validation.md, "The adjoint projection").
 use super::Solver;
 use crate::mps::grid::entry_index;
 use crate::mps::kernel::weight;
@@ -32,12 +37,43 @@ fn merged<T: Copy + std::ops::AddAssign>(mut entries: Vec<(u32, T)>) -> Vec<(u32
     out
 }
 
+/// One row of an increment's matrix from its (column, value) entries (particle columns, in
+/// any order): merged per column, the own column `own` added to `diag_extra` as the diagonal,
+/// unknowns (`unknown_of`) pushed as CSR entries in ascending order, and the known columns
+/// moved over: returns the diagonal and -sum a_ij known_j.
+fn split_row(
+    entries: Vec<(u32, f64)>,
+    own: usize,
+    diag_extra: f64,
+    unknown_of: &[u32],
+    known: &[f64],
+    columns: &mut Vec<u32>,
+    values: &mut Vec<f64>,
+) -> (f64, f64) {
+    let mut diag = diag_extra;
+    let mut known_sum = 0.0;
+    for (col, v) in merged(entries) {
+        let col = col as usize;
+        if col == own {
+            diag += v;
+        } else if unknown_of[col] != u32::MAX {
+            columns.push(unknown_of[col]);
+            values.push(v);
+        } else {
+            known_sum -= v * known[col];
+        }
+    }
+    (diag, known_sum)
+}
+
 impl<const D: usize> Solver<D> {
     /// The corrected increment gradient of every fluid particle as sparse rows (empty for
     /// other particles): C_i sum_j (dp_j - dp_i) e_ij over fluid neighbours, with
     /// e_ij = r_ij w_ij / r_ij^2, and walls and dummies carrying the weighted mean of i's
     /// fluid neighbours' increments (as the increment's correction does); supporting walls
-    /// (`support`) are unknowns and carry their own.
+    /// (`support`) are unknowns and carry their own. With `conservative` (the carried
+    /// gradient's conservative rows, for the adjoint projection) those rows replace the
+    /// fluid neighbours' C_i e_ij terms, so the correction pushes as the prediction does.
     pub(super) fn gradient_rows(
         &self,
         corrections: &[SMatrix<f64, D, D>],
@@ -137,20 +173,7 @@ impl<const D: usize> Solver<D> {
             for &(col, g) in &gradient[i] {
                 entries.push((col, scale * all.dot(&g)));
             }
-            let mut diag = diag_extra;
-            let mut known_sum = 0.0;
-            for (col, v) in merged(entries) {
-                let col = col as usize;
-                if col == i {
-                    diag += v;
-                } else if unknown_of[col] != u32::MAX {
-                    columns.push(unknown_of[col]);
-                    values.push(v);
-                } else {
-                    known_sum -= v * known[col];
-                }
-            }
-            (diag, known_sum)
+            split_row(entries, i, diag_extra, unknown_of, known, columns, values)
         })
     }
 }
@@ -191,19 +214,8 @@ impl<const D: usize> Solver<D> {
                     entries.push((l, g_ic.dot(&g_il)));
                 }
             }
-            let mut diag = diag_extra;
-            let mut known_sum = 0.0;
-            for (col, v) in merged(entries) {
-                let col = col as usize;
-                if col == c {
-                    diag += v;
-                } else if unknown_of[col] != u32::MAX {
-                    columns.push(unknown_of[col]);
-                    values.push(v);
-                } else {
-                    known_sum -= v * known[col];
-                }
-            }
+            let (diag, known_sum) =
+                split_row(entries, c, diag_extra, unknown_of, known, columns, values);
             (diag, (known_sum, adjoint_divergence))
         });
         let (known_sums, divergence) = sums.into_iter().unzip();
