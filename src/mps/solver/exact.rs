@@ -176,9 +176,7 @@ impl<const D: usize> Solver<D> {
             split_row(entries, i, diag_extra, unknown_of, known, columns, values)
         })
     }
-}
 
-impl<const D: usize> Solver<D> {
     /// G^T G over the unknowns `rows` (`unknown_of` their row), summed over every fluid
     /// particle's gradient row, plus the artificial compressibility on the diagonal; with
     /// G^T u* per row (G^T the divergence adjoint to G, up to its sign: -div). The

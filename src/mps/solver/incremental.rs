@@ -163,36 +163,10 @@ impl<const D: usize> Solver<D> {
                 rows.push(i);
             }
         }
-        // Source: -(rho/dt) div(u*), walls at their own velocity (no penetration; only the
-        // radial relative velocity of each pair counts, so shear along a no-slip wall makes
-        // none), plus the relaxed compression term.
-        let compression_scale = c.compression_relaxation * rho / (dt_s * dt_s);
-        let near = &self.pairs.near;
-        let compression =
-            |i: usize| compression_scale * ((number_density[i] - refs.n0).max(0.0) / refs.n0);
-        // Under the adjoint projection the source comes with its matrix (below).
-        let adjoint = c.adjoint_projection;
-        let mut source: Vec<f64> = if adjoint {
-            Vec::new()
-        } else {
-            rows.par_iter()
-                .with_min_len(PARTICLES_PER_TASK)
-                .with_max_len(PARTICLES_PER_TASK)
-                .map(|&i| {
-                    let ui = p.velocity_m_s[i];
-                    let div = divergence(&p.position_m, near, i, refs.radius_n_m, refs.n0, |e| {
-                        near.reflect(e, p.velocity_m_s[entry_index(e)]) - ui
-                    });
-                    if !is_fluid(i) {
-                        return -rho / dt_s * div;
-                    }
-                    -rho / dt_s * div + compression(i)
-                })
-                .collect()
-        };
         // Exact projection: -D G with the correction's own gradient (`exact.rs`). Adjoint
         // projection: G^T G with the same rows, the carried gradient's conservative ones under
         // `conservative_gradient` (the projection then pushes as the prediction does).
+        let adjoint = c.adjoint_projection;
         let gradient = (c.exact_projection || adjoint).then(|| {
             let conservative = (adjoint && c.conservative_gradient)
                 .then(|| self.conservative_gradient_rows(&corrections, &number_density));
@@ -211,29 +185,59 @@ impl<const D: usize> Solver<D> {
                 }
             })
             .collect();
-        let (matrix, known) = match &gradient {
+        // The adjoint projection's matrix comes with its divergence, -G^T u* per row.
+        let (matrix, known, adjoint_divergence) = match &gradient {
             Some(gradient) if adjoint => {
-                let (matrix, known, divergence) =
+                let (matrix, known, transposed) =
                     self.adjoint_ppe(dt_s, &rows, &unknown_of, gradient, &known);
-                // -rho/dt div(u*) with div = -G^T.
-                source = rows
-                    .iter()
-                    .zip(&divergence)
-                    .map(|(&i, d)| {
-                        let s = rho / dt_s * d;
-                        if is_fluid(i) { s + compression(i) } else { s }
-                    })
-                    .collect();
-                (matrix, known)
+                (matrix, known, Some(transposed))
             }
-            Some(gradient) => self.exact_ppe(dt_s, &rows, &unknown_of, gradient, &known),
-            None => self.assemble_ppe(
-                dt_s,
-                &rows,
-                &unknown_of,
-                |j| is_fluid(j) || support[j],
-                |j| known[j],
-            ),
+            Some(gradient) => {
+                let (matrix, known) = self.exact_ppe(dt_s, &rows, &unknown_of, gradient, &known);
+                (matrix, known, None)
+            }
+            None => {
+                let (matrix, known) = self.assemble_ppe(
+                    dt_s,
+                    &rows,
+                    &unknown_of,
+                    |j| is_fluid(j) || support[j],
+                    |j| known[j],
+                );
+                (matrix, known, None)
+            }
+        };
+        // Source: -(rho/dt) div(u*), walls at their own velocity (no penetration; only the
+        // radial relative velocity of each pair counts, so shear along a no-slip wall makes
+        // none), plus the relaxed compression term at fluid rows.
+        let compression_scale = c.compression_relaxation * rho / (dt_s * dt_s);
+        let source_of = |i: usize, div: f64| {
+            let s = -rho / dt_s * div;
+            if is_fluid(i) {
+                s + compression_scale * ((number_density[i] - refs.n0).max(0.0) / refs.n0)
+            } else {
+                s
+            }
+        };
+        let near = &self.pairs.near;
+        let source: Vec<f64> = match adjoint_divergence {
+            Some(transposed) => rows
+                .iter()
+                .zip(&transposed)
+                .map(|(&i, &g_t_u)| source_of(i, -g_t_u))
+                .collect(),
+            None => rows
+                .par_iter()
+                .with_min_len(PARTICLES_PER_TASK)
+                .with_max_len(PARTICLES_PER_TASK)
+                .map(|&i| {
+                    let ui = p.velocity_m_s[i];
+                    let div = divergence(&p.position_m, near, i, refs.radius_n_m, refs.n0, |e| {
+                        near.reflect(e, p.velocity_m_s[entry_index(e)]) - ui
+                    });
+                    source_of(i, div)
+                })
+                .collect(),
         };
         let rhs: Vec<f64> = source.iter().zip(&known).map(|(s, k)| s + k).collect();
         // The increment is small once the carried pressure has settled: start from zero.
