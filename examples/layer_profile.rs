@@ -3,8 +3,10 @@
 //! speed, closed form u(y) = (rho g sin theta / mu_p) ((h - h_c) y - y^2 / 2) below the plug,
 //! U in it), the viscous Laplacian's answer to u = y^2/2 on the particles as they are (exact:
 //! 1), the yield solve's multiplier (its shear component and its size |lambda|/sqrt(2), both
-//! tau_y where the fluid yields in simple shear), and the layer's top (largest height, 99th
-//! percentile). Where a disordered layer (`scene.disorder`) moves faster or slower than U,
+//! tau_y where the fluid yields in simple shear), each row's disorder (the spread of its
+//! heights in spacings, the rms of its velocity about the row's mean, the rms of its carried
+//! pressure about the row's mean: a particle-to-particle pattern), and the layer's top
+//! (largest height, 99th percentile). Where a disordered layer (`scene.disorder`) moves faster or slower than U,
 //! this says which of the floor, the viscous term, the yield term or a swollen layer it is
 //! (docs/validation.md, "A disordered layer on an incline").
 //!
@@ -92,6 +94,13 @@ fn main() {
         vec![0.0; rows],
         vec![0.0; rows],
     );
+    // Second moments for the row's disorder: the spread of its heights and its velocity's
+    // fluctuation about the row's mean (every component).
+    let (mut y2sum, mut v2sum, mut vsum) =
+        (vec![0.0; rows], vec![0.0; rows], vec![vec![0.0; d]; rows]);
+    // The carried pressure's fluctuation about the row's mean: a pattern from particle to
+    // particle that the gradient does not see.
+    let (mut psum, mut p2sum) = (vec![0.0; rows], vec![0.0; rows]);
     // The yield solve's multiplier (the yield part of the deviatoric stress): its shear
     // component and its size |lambda| / sqrt(2), both tau_y where the fluid yields in simple
     // shear.
@@ -106,6 +115,14 @@ fn main() {
         let row = ((y / l0).floor().max(0.0) as usize).min(rows - 1);
         sum[row] += state.velocity_m_s[i * d];
         ysum[row] += y;
+        y2sum[row] += y * y;
+        psum[row] += state.pressure_pa[i];
+        p2sum[row] += state.pressure_pa[i] * state.pressure_pa[i];
+        for a in 0..d {
+            let v = state.velocity_m_s[i * d + a];
+            vsum[row][a] += v;
+            v2sum[row] += v * v;
+        }
         lap[row] += response(i);
         if stress.len() == count_all * d * d {
             let t = &stress[i * d * d..(i + 1) * d * d];
@@ -126,21 +143,32 @@ fn main() {
         p99
     );
     println!(
-        "row  y_mean_m  count  u_mm_s  closed_mm_s  laplacian_of_y2/2  yield_shear_pa  yield_size_pa"
+        "row  y_mean_m  count  u_mm_s  closed_mm_s  laplacian_of_y2/2  yield_shear_pa  yield_size_pa  y_spread_l0  u_fluct_mm_s  p_fluct_pa"
     );
     for r in 0..rows {
         if count[r] == 0 {
             continue;
         }
-        let y = ysum[r] / count[r] as f64;
+        let n = count[r] as f64;
+        let y = ysum[r] / n;
+        // Standard deviations: heights in spacings, velocity (all components) in mm/s.
+        let y_spread = (y2sum[r] / n - y * y).max(0.0).sqrt() / l0;
+        let v_mean2: f64 = vsum[r].iter().map(|s| (s / n) * (s / n)).sum();
+        let v_fluct = (v2sum[r] / n - v_mean2).max(0.0).sqrt();
+        let p_fluct = (p2sum[r] / n - (psum[r] / n) * (psum[r] / n))
+            .max(0.0)
+            .sqrt();
         println!(
-            "{r:3}  {y:.4}  {:5}  {:8.2}  {:8.2}  {:.4}  {:7.2}  {:7.2}",
+            "{r:3}  {y:.4}  {:5}  {:8.2}  {:8.2}  {:.4}  {:7.2}  {:7.2}  {:6.3}  {:7.2}  {:8.2}",
             count[r],
             1e3 * sum[r] / count[r] as f64,
             1e3 * closed(y),
             lap[r] / count[r] as f64,
             shear[r] / count[r] as f64,
-            size[r] / count[r] as f64
+            size[r] / count[r] as f64,
+            y_spread,
+            1e3 * v_fluct,
+            p_fluct
         );
     }
 }
