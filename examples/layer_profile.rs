@@ -118,9 +118,11 @@ fn main() {
         y2sum[row] += y * y;
         psum[row] += state.pressure_pa[i];
         p2sum[row] += state.pressure_pa[i] * state.pressure_pa[i];
-        for a in 0..d {
-            let v = state.velocity_m_s[i * d + a];
-            vsum[row][a] += v;
+        for (sum, &v) in vsum[row]
+            .iter_mut()
+            .zip(&state.velocity_m_s[i * d..i * d + d])
+        {
+            *sum += v;
             v2sum[row] += v * v;
         }
         lap[row] += response(i);
