@@ -6,8 +6,8 @@
 //! tau_y where the fluid yields in simple shear), each row's disorder (the spread of its
 //! heights in spacings, the rms of its velocity about the row's mean, the rms of its carried
 //! pressure about the row's mean: a particle-to-particle pattern), and the layer's top
-//! (largest height, 99th percentile). Where a disordered layer (`scene.disorder`) moves faster or slower than U,
-//! this says which of the floor, the viscous term, the yield term or a swollen layer it is
+//! (largest height, 99th percentile). Where a disordered layer (`scene.disorder`) moves
+//! faster or slower than U, this says which of the floor, the viscous term, the yield term or a swollen layer it is
 //! (docs/validation.md, "A disordered layer on an incline").
 //!
 //! Usage: cargo run --release --example layer_profile -- FILE.mcap [--at T_S]
@@ -154,23 +154,29 @@ fn main() {
         let n = count[r] as f64;
         let y = ysum[r] / n;
         // Standard deviations: heights in spacings, velocity (all components) in mm/s.
-        let y_spread = (y2sum[r] / n - y * y).max(0.0).sqrt() / l0;
-        let v_mean2: f64 = vsum[r].iter().map(|s| (s / n) * (s / n)).sum();
-        let v_fluct = (v2sum[r] / n - v_mean2).max(0.0).sqrt();
-        let p_fluct = (p2sum[r] / n - (psum[r] / n) * (psum[r] / n))
-            .max(0.0)
-            .sqrt();
+        let y_spread = spread(y2sum[r] / n, y * y) / l0;
+        let v_fluct = spread(
+            v2sum[r] / n,
+            vsum[r].iter().map(|s| (s / n) * (s / n)).sum(),
+        );
+        let p_fluct = spread(p2sum[r] / n, (psum[r] / n) * (psum[r] / n));
         println!(
             "{r:3}  {y:.4}  {:5}  {:8.2}  {:8.2}  {:.4}  {:7.2}  {:7.2}  {:6.3}  {:7.2}  {:8.2}",
             count[r],
-            1e3 * sum[r] / count[r] as f64,
+            1e3 * sum[r] / n,
             1e3 * closed(y),
-            lap[r] / count[r] as f64,
-            shear[r] / count[r] as f64,
-            size[r] / count[r] as f64,
+            lap[r] / n,
+            shear[r] / n,
+            size[r] / n,
             y_spread,
             1e3 * v_fluct,
             p_fluct
         );
     }
+}
+
+/// The standard deviation from the mean square and the square of the mean (0 where rounding
+/// makes the difference negative).
+fn spread(mean_square: f64, mean_squared: f64) -> f64 {
+    (mean_square - mean_squared).max(0.0).sqrt()
 }
