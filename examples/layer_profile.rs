@@ -7,8 +7,8 @@
 //! heights in spacings, the rms of its velocity about the row's mean, the rms of its carried
 //! pressure about the row's mean: a particle-to-particle pattern), and the layer's top
 //! (largest height, 99th percentile). Where a disordered layer (`scene.disorder`) moves
-//! faster or slower than U, this says which of the floor, the viscous term, the yield term or a swollen layer it is
-//! (docs/validation.md, "A disordered layer on an incline").
+//! faster or slower than U, this says which of the floor, the viscous term, the yield term
+//! or a swollen layer it is (docs/validation.md, "A disordered layer on an incline").
 //!
 //! Usage: cargo run --release --example layer_profile -- FILE.mcap [--at T_S]
 use mps_runner::experiment::SceneSpec;
