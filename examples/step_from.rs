@@ -7,7 +7,7 @@
 //! last step was reproduced bit for bit, as `runner verify` would.
 //!
 //! Usage: cargo run --release --example step_from -- FILE.mcap --at T_S --for S
-//!        [--every S] [--threads N] [--metric NAME] [KEY=VALUE ...]
+//!        [--every S] [--threads N] [--metric NAME] [--watch I] [KEY=VALUE ...]
 //! `--at` takes the last checkpoint at or before T_S; each KEY=VALUE is a `--set` applied on
 //! top of the file's own overrides (so `mps.surface_depth=0`). `--every` prints a row each
 //! S seconds of simulated time (default 0.1): the mean and largest kinetic energy of the
@@ -19,6 +19,8 @@
 //! stress it carries across the band's floor, both in Pa over the area A_M2 of a band (the
 //! period in 2D, per metre of depth; period times width in 3D), and each stage's force on
 //! the whole fluid (docs/validation.md, "A disordered layer on an incline").
+//! `--watch I` prints particle I after every step: its position, velocity and pressure, and
+//! its nearest neighbour (distance in spacings, kind): how a single particle blows up.
 use mps_runner::experiment::{SceneSpec, experiment_metrics};
 use mps_runner::manifest;
 use mps_runner::mps::{ParticleKind, STAGE_NAMES, Solver, StageMomentum};
@@ -35,6 +37,8 @@ struct Plan {
     /// `--stage-momentum`'s band height, and `--area`.
     band_m: Option<f64>,
     area_m2: f64,
+    /// `--watch`: the particle traced after every step.
+    watch: Option<usize>,
 }
 
 fn main() {
@@ -47,6 +51,7 @@ fn main() {
         metric: None,
         band_m: None,
         area_m2: 1.0,
+        watch: None,
     };
     let mut sets = Vec::new();
     let mut i = 0;
@@ -63,6 +68,7 @@ fn main() {
             "--threads" => (threads, i) = (value(i) as usize, i + 1),
             "--stage-momentum" => (plan.band_m, i) = (Some(value(i)), i + 1),
             "--area" => (plan.area_m2, i) = (value(i), i + 1),
+            "--watch" => (plan.watch, i) = (Some(value(i) as usize), i + 1),
             "--metric" => {
                 plan.metric = Some(args.get(i + 1).expect("--metric needs a name").clone());
                 i += 1;
@@ -145,7 +151,11 @@ fn step_on<const D: usize>(
     let horizon_s = m.time.end_s.max(end);
     while solver.time_s < end - 1e-9 {
         let dt = solver.next_dt_s(horizon_s);
-        if let Err(e) = solver.step(dt) {
+        let stepped = solver.step(dt);
+        if let Some(w) = plan.watch {
+            watch(&solver, w, m.spacing_m);
+        }
+        if let Err(e) = stepped {
             println!("# step failed at t = {}: {e:?}", solver.time_s);
             return;
         }
@@ -195,6 +205,35 @@ fn step_on<const D: usize>(
             if same { "identical" } else { "differs" }
         );
     }
+}
+
+/// One line on particle `w` after a step: time, step, position, velocity, pressure, and its
+/// nearest other particle (distance in spacings, kind). A linear search: a trace, not a loop.
+fn watch<const D: usize>(solver: &Solver<D>, w: usize, spacing_m: f64) {
+    let p = &solver.particles;
+    assert!(
+        w < p.len(),
+        "--watch {w}: the run has {} particles",
+        p.len()
+    );
+    let x = p.position_m[w];
+    let nearest = (0..p.len())
+        .filter(|&j| j != w)
+        .map(|j| ((p.position_m[j] - x).norm(), j))
+        .min_by(|a, b| a.0.total_cmp(&b.0));
+    let near = nearest.map_or(String::from("none"), |(r, j)| {
+        format!("{:.3} l0 ({:?} {j})", r / spacing_m, p.kind[j])
+    });
+    println!(
+        "watch t {:.5} step {} {:?} x {:?} v {:?} |v| {:.3e} p {:.1} nearest {near}",
+        solver.time_s,
+        solver.step,
+        p.kind[w],
+        x.as_slice(),
+        p.velocity_m_s[w].as_slice(),
+        p.velocity_m_s[w].norm(),
+        p.pressure_pa[w],
+    );
 }
 
 /// Each stage's force on each band (Pa over `area_m2`: rho V sum du / (T A)) and, summed from

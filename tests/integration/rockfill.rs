@@ -374,3 +374,22 @@ fn bad_rockfill_sections_are_refused_naming_the_field() {
     refused(none, &["scene.bed.height_m=0.5"], "scene.bed.height_m");
     refused(none, &["scene.bed.misses=0"], "scene.bed.misses");
 }
+
+/// `tools/critical_slope.py` (docs/rockfill.md, "Where the drain stops"): its fit of the
+/// slit law gives back the threshold, gain and creep floor of made-up front speeds
+/// (`--self-test`). Needs MPS_PYTHON, which tools/test.sh sets.
+#[test]
+#[ignore = "needs the Python venv; tools/test.sh runs it"]
+fn the_critical_slope_fit_recovers_a_known_threshold() {
+    let out = std::process::Command::new(common::python())
+        .arg(common::root().join("tools/critical_slope.py"))
+        .arg("--self-test")
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success() && text.contains("self-test: ok"),
+        "{text}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
