@@ -14,18 +14,23 @@ gradient rho f g S meets its threshold at f = f*; c is what still moves below it
 scheme's creep). The state stops under gravity f* g, so under g its surface would stand at
 the critical slope S_c = f* S, S the run's `surface_slope` at the checkpoint. The output
 sets S_c beside the hydraulic-radius estimate (`closed_form_surface_slope`, tau_0 / (rho g
-R_h)) and, given the yield stress, density and gap w between rocks (`scene.bed.gap_m`),
-beside the slit's own threshold 2 tau_0 / (rho g w) (docs/rockfill.md, "Where the drain stops").
+R_h)) and, for a bed with a gap w between rocks (`scene.bed.gap_m` > 0), beside the slit's
+own threshold 2 tau_0 / (rho g w) (docs/rockfill.md, "Where the drain stops"). g, tau_0, rho
+and w come from the run's stored manifest.
 
-Usage: python3 tools/critical_slope.py RUN.mcap --at T_S [--factors 0.4,0.6,...]
-           [--slit TAU_PA,RHO_KG_M3,GAP_M] [--gravity-m-s2 9.81]
+Usage: .venv/bin/python tools/critical_slope.py RUN.mcap --at T_S [--factors 0.4,0.6,...]
            [--runner target/release/runner] [--step-from target/release/examples/step_from]
-       python3 tools/critical_slope.py --self-test   (the fit recovers a known threshold)
-Standard library only.
+       .venv/bin/python tools/critical_slope.py --self-test   (the fit recovers a known
+           threshold)
+The readers of tools/requirements.txt (the venv tools/test.sh makes); the binaries from
+`cargo build --release --examples --bins`.
 """
 import argparse
 import csv
 import io
+import json
+import os
+import re
 import subprocess
 import sys
 
@@ -74,16 +79,26 @@ def diagnostics_row(runner, run, at_s):
 
 
 def front_speed_mm_s(step_from, run, at_s, factor, g):
-    """The front's advance along the floor over the last 3 s of 4 under gravity factor g."""
+    """The front's advance along the floor over the last 3 s of 4 under gravity factor g, and
+    the time of the checkpoint the restart began from."""
     out = subprocess.run(
         [step_from, run, "--at", str(at_s), "--for", "4", "--every", "1",
          "--metric", "floor_reach_m", f"gravity_m_s2={factor * g!r}"],
         check=True, capture_output=True, text=True,
     ).stdout
+    start = float(re.search(r"# from t = (\S+) s", out).group(1))
     reach = [float(line.split()[-1]) for line in out.splitlines() if "floor_reach_m" in line]
     if len(reach) < 4:
-        return None  # the step failed (the state blew up): no speed
-    return (reach[3] - reach[0]) / 3.0 * 1000.0
+        return None, start  # the step failed (the state blew up): no speed
+    return (reach[3] - reach[0]) / 3.0 * 1000.0, start
+
+
+def stored_manifest(run):
+    """The run's canonical manifest, read with the project's MCAP reader."""
+    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+    import check_mcap  # noqa: E402  (needs tools/requirements.txt)
+
+    return json.loads(check_mcap.read_complete(run).metadata["manifest"]["canonical"])
 
 
 def self_test():
@@ -104,10 +119,6 @@ def main():
     p.add_argument("--factors", default="0.3,0.4,0.5,0.6,0.75,1.0,1.25,1.5")
     p.add_argument("--runner", default="target/release/runner")
     p.add_argument("--step-from", default="target/release/examples/step_from")
-    p.add_argument("--gravity-m-s2", type=float, default=9.81, help="the run's g")
-    p.add_argument("--slit", default=None, metavar="TAU_PA,RHO_KG_M3,GAP_M",
-                   help="the run's yield stress, density and gap between rocks, for the "
-                        "slit's threshold 2 tau_0 / (rho g w)")
     p.add_argument("--self-test", action="store_true")
     a = p.parse_args()
     if a.self_test:
@@ -115,19 +126,23 @@ def main():
         return 0
     if a.run is None or a.at is None:
         p.error("RUN.mcap and --at are needed (or --self-test)")
-    row = diagnostics_row(a.runner, a.run, a.at)
-    slope = float(row["surface_slope"])
-    estimate = float(row["closed_form_surface_slope"])
-    g = a.gravity_m_s2
-    print(f"# {a.run} at t = {float(row['time_s']):.2f} s: surface slope {slope:.4f}, "
-          f"hydraulic-radius estimate {estimate:.4f}")
+    m = stored_manifest(a.run)
+    g = float(m["gravity_m_s2"])
     print("factor  front_speed_mm_s")
-    points = []
+    points, start = [], None
     for f in (float(x) for x in a.factors.split(",")):
-        v = front_speed_mm_s(a.step_from, a.run, a.at, f, g)
+        v, start = front_speed_mm_s(a.step_from, a.run, a.at, f, g)
         print(f"{f:.3f}  {'failed' if v is None else f'{v:.3f}'}")
         if v is not None:
             points.append((f, v))
+    if start is None:
+        p.error("--factors lists no factor")
+    # The slope of the state the restarts began from.
+    row = diagnostics_row(a.runner, a.run, start)
+    slope = float(row["surface_slope"])
+    estimate = float(row["closed_form_surface_slope"])
+    print(f"# {a.run}, the checkpoint at t = {start:.4f} s: surface slope {slope:.4f}, "
+          f"hydraulic-radius estimate {estimate:.4f}")
     got = fit(points)
     if got is None:
         print("no threshold: the speeds do not rise with gravity as a slit's flux does")
@@ -137,9 +152,10 @@ def main():
     print(f"threshold f* {f_star:.3f} (K {big_k:.2f} mm/s, floor {c:.2f} mm/s, rms {rms:.2f})")
     print(f"critical slope {critical:.4f}: {critical / estimate:.2f} x the hydraulic-radius "
           f"estimate {estimate:.4f}", end="")
-    if a.slit:
-        tau, rho, gap = (float(x) for x in a.slit.split(","))
-        slit = 2.0 * tau / (rho * g * gap)
+    gap = float(m["scene"].get("bed", {}).get("gap_m", 0.0))
+    fluid = m["fluid"]
+    if gap > 0.0 and "yield_stress_pa" in fluid:
+        slit = 2.0 * float(fluid["yield_stress_pa"]) / (float(fluid["density_kg_m3"]) * g * gap)
         print(f", {critical / slit:.2f} x the slit's 2 tau_0 / (rho g w) = {slit:.4f}")
     else:
         print()
