@@ -47,11 +47,11 @@ def fit(points):
     Returns (f_star, K, c, rms) for the best f* with K > 0, or None."""
     best = None
     n = len(points)
+    sv = sum(v for _, v in points)
     for k in range(1, 3000):
         f_star = k * 0.001
         b = [slot_flux(f, f_star) for f, _ in points]
         sb, sbb = sum(b), sum(x * x for x in b)
-        sv = sum(v for _, v in points)
         sbv = sum(x * v for x, (_, v) in zip(b, points))
         det = n * sbb - sb * sb
         if det <= 0.0:
@@ -126,26 +126,44 @@ def main():
         return 0
     if a.run is None or a.at is None:
         p.error("RUN.mcap and --at are needed (or --self-test)")
+    try:
+        factors = [float(x) for x in a.factors.split(",")]
+    except ValueError:
+        p.error(f"--factors {a.factors!r}: not a comma-separated list of numbers")
+    if len(factors) < 4 or min(factors) <= 0.0:
+        p.error("--factors needs at least four factors (the fit has three unknowns), each above 0")
+    try:
+        return scan(a, factors)
+    except subprocess.CalledProcessError as e:
+        print(f"critical_slope: {' '.join(e.cmd[:2])} failed:\n{e.stderr}", file=sys.stderr)
+    except KeyError as e:
+        print(f"critical_slope: {a.run} has no {e} (not a rock-fill run?)", file=sys.stderr)
+    except OSError as e:
+        print(f"critical_slope: {e}", file=sys.stderr)
+    return 2
+
+
+def scan(a, factors):
+    """The scan over `factors`, the fit and the comparison, printed; 0, or 1 without a fit."""
     m = stored_manifest(a.run)
     g = float(m["gravity_m_s2"])
     print("factor  front_speed_mm_s")
     points, start = [], None
-    for f in (float(x) for x in a.factors.split(",")):
+    for f in factors:
         v, start = front_speed_mm_s(a.step_from, a.run, a.at, f, g)
         print(f"{f:.3f}  {'failed' if v is None else f'{v:.3f}'}")
         if v is not None:
             points.append((f, v))
-    if start is None:
-        p.error("--factors lists no factor")
     # The slope of the state the restarts began from.
     row = diagnostics_row(a.runner, a.run, start)
     slope = float(row["surface_slope"])
     estimate = float(row["closed_form_surface_slope"])
     print(f"# {a.run}, the checkpoint at t = {start:.4f} s: surface slope {slope:.4f}, "
           f"hydraulic-radius estimate {estimate:.4f}")
-    got = fit(points)
+    got = fit(points) if len(points) >= 4 else None
     if got is None:
-        print("no threshold: the speeds do not rise with gravity as a slit's flux does")
+        print("no threshold: fewer than four restarts ran, or the speeds do not rise with "
+              "gravity as a slit's flux does")
         return 1
     f_star, big_k, c, rms = got
     critical = f_star * slope
