@@ -121,6 +121,7 @@ fn step_on<const D: usize>(
     let mut solver: Solver<D> = mps_runner::checkpoint::solver_from_message(config, state)
         .unwrap_or_else(|e| panic!("{e}"));
     let start = solver.time_s;
+    let first_step = solver.step;
     let end = start + for_s;
     if let Some(band_m) = plan.band_m {
         let top = solver
@@ -192,6 +193,7 @@ fn step_on<const D: usize>(
     if let Some(sums) = &solver.stage_momentum {
         print_stage_momentum(sums, m, plan.area_m2);
     }
+    print_cost(&solver.timing, solver.step - first_step);
     // With nothing changed, a recorded checkpoint at the same step must be reproduced bit for
     // bit (the replay `runner verify` does); say so, so that a changed setting is the only
     // difference a comparison sees.
@@ -205,6 +207,23 @@ fn step_on<const D: usize>(
             if same { "identical" } else { "differs" }
         );
     }
+}
+
+/// What the steps cost, stage by stage (wall seconds) and in CG iterations a step: the way
+/// to compare solver settings on one recorded state.
+fn print_cost(t: &mps_runner::mps::StageTimes, steps: u64) {
+    let per_step = |n: u64| n as f64 / steps.max(1) as f64;
+    println!(
+        "# cost of {steps} steps: {:.3} s; PPE solve {:.3} s ({:.1} it/step), PPE assembly {:.3} s, viscosity {:.3} s ({:.1} it/step), lists {:.3} s, kernel pairs {:.3} s",
+        t.step_total_s,
+        t.pressure_solve_s,
+        per_step(t.ppe_iterations),
+        t.pressure_assembly_s,
+        t.viscosity_s,
+        per_step(t.viscosity_iterations),
+        t.neighbours_s,
+        t.kernel_pairs_s
+    );
 }
 
 /// One line on particle `w` after a step: time, step, position, velocity, pressure, and its
