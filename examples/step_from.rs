@@ -209,21 +209,13 @@ fn step_on<const D: usize>(
     }
 }
 
-/// What the steps cost, stage by stage (wall seconds) and in CG iterations a step: the way
-/// to compare solver settings on one recorded state.
+/// What the steps cost, stage by stage (wall seconds, CG iterations a step; the rows of
+/// `runner bench`): the way to compare solver settings on one recorded state.
 fn print_cost(t: &mps_runner::mps::StageTimes, steps: u64) {
-    let per_step = |n: u64| n as f64 / steps.max(1) as f64;
-    println!(
-        "# cost of {steps} steps: {:.3} s; PPE solve {:.3} s ({:.1} it/step), PPE assembly {:.3} s, viscosity {:.3} s ({:.1} it/step), lists {:.3} s, kernel pairs {:.3} s",
-        t.step_total_s,
-        t.pressure_solve_s,
-        per_step(t.ppe_iterations),
-        t.pressure_assembly_s,
-        t.viscosity_s,
-        per_step(t.viscosity_iterations),
-        t.neighbours_s,
-        t.kernel_pairs_s
-    );
+    println!("# cost of {steps} steps: {:.3} s", t.step_total_s);
+    for (name, seconds) in t.stage_rows(steps as f64) {
+        println!("#   {name:<46} {seconds:>9.3}");
+    }
 }
 
 /// One line on particle `w` after a step: time, step, position, velocity, pressure, and its

@@ -221,6 +221,56 @@ pub struct StageTimes {
     pub step_total_s: f64,
 }
 
+impl StageTimes {
+    /// The solver's stages as (label, seconds) rows over `steps` steps, in the order `runner
+    /// bench` prints them (its suite reads the labels back), "other" being the step's time
+    /// left over by the named stages.
+    pub fn stage_rows(&self, steps: f64) -> [(String, f64); 6] {
+        let per_step = |total: u64| total as f64 / steps.max(1.0);
+        let other = self.step_total_s
+            - self.neighbours_s
+            - self.kernel_pairs_s
+            - self.viscosity_s
+            - self.pressure_assembly_s
+            - self.pressure_solve_s;
+        [
+            (
+                format!(
+                    "neighbour lists ({} cell-grid builds, {} updates)",
+                    self.list_builds, self.list_updates
+                ),
+                self.neighbours_s,
+            ),
+            (
+                "kernel pairs (lists cut to radii)".to_string(),
+                self.kernel_pairs_s,
+            ),
+            (
+                format!(
+                    "viscosity (strain, assembly, CG {:.1} it/step)",
+                    per_step(self.viscosity_iterations)
+                ),
+                self.viscosity_s,
+            ),
+            (
+                "PPE assembly (n*, surface, source, CSR)".to_string(),
+                self.pressure_assembly_s,
+            ),
+            (
+                format!(
+                    "PPE solve (CG {:.1} it/step)",
+                    per_step(self.ppe_iterations)
+                ),
+                self.pressure_solve_s,
+            ),
+            (
+                "other solver stages (collision, correction)".to_string(),
+                other,
+            ),
+        ]
+    }
+}
+
 /// Why a step could not be completed.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum StepError {

@@ -83,46 +83,8 @@ fn one(path: &Path, set: &[String], threads: Option<usize>, out: Option<PathBuf>
 /// The table of where the wall time went: solver stages, then recording and output.
 fn print_stages(result: &RunResult, steps: f64, wall: f64) {
     let t = &result.timing;
-    let other = t.step_total_s
-        - t.neighbours_s
-        - t.kernel_pairs_s
-        - t.viscosity_s
-        - t.pressure_assembly_s
-        - t.pressure_solve_s;
-    let per_step = |total: u64| total as f64 / steps.max(1.0);
-    let rows = [
-        (
-            format!(
-                "neighbour lists ({} cell-grid builds, {} updates)",
-                t.list_builds, t.list_updates
-            ),
-            t.neighbours_s,
-        ),
-        (
-            "kernel pairs (lists cut to radii)".to_string(),
-            t.kernel_pairs_s,
-        ),
-        (
-            format!(
-                "viscosity (strain, assembly, CG {:.1} it/step)",
-                per_step(t.viscosity_iterations)
-            ),
-            t.viscosity_s,
-        ),
-        (
-            "PPE assembly (n*, surface, source, CSR)".to_string(),
-            t.pressure_assembly_s,
-        ),
-        (
-            format!("PPE solve (CG {:.1} it/step)", per_step(t.ppe_iterations)),
-            t.pressure_solve_s,
-        ),
-        (
-            "other solver stages (collision, correction)".to_string(),
-            other,
-        ),
-        ("recording and output".to_string(), wall - t.step_total_s),
-    ];
+    let recording = ("recording and output".to_string(), wall - t.step_total_s);
+    let rows = t.stage_rows(steps).into_iter().chain([recording]);
     println!("{:<46} {:>9} {:>7}", "stage", "seconds", "share");
     for (name, seconds) in rows {
         println!("{name:<46} {seconds:>9.3} {:>6.1}%", 100.0 * seconds / wall);
