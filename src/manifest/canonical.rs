@@ -60,6 +60,13 @@ pub fn canonical_text<S: SceneSection>(manifest: &Manifest<S>) -> String {
     {
         mps.remove("multigrid_over_correction");
     }
+    // The f64 smoother (the behaviour before the field), or a choice Jacobi never reads.
+    if (!manifest.mps.multigrid_single_precision
+        || manifest.mps.ppe_preconditioner == PpePreconditioner::Jacobi)
+        && let Some(mps) = value.get_mut("mps").and_then(Value::as_object_mut)
+    {
+        mps.remove("multigrid_single_precision");
+    }
     if manifest.mps.pressure_scheme == PressureSchemeName::Standard
         && let Some(mps) = value.get_mut("mps").and_then(Value::as_object_mut)
     {

@@ -424,6 +424,13 @@ pub struct Mps {
     /// that grows less with the size (docs/performance.md, "Multigrid over-correction").
     #[serde(default = "default_multigrid_over_correction")]
     pub multigrid_over_correction: f64,
+    /// Multigrid only: the cycle's finest smoothing multiplies by the PPE matrix with its
+    /// entries rounded to single precision (8 bytes an entry read instead of 12; CG's own
+    /// product stays f64, so the solve meets `ppe_tolerance` on the true matrix). Same
+    /// solution to the tolerance, other bits (docs/performance.md, "A single-precision
+    /// smoother").
+    #[serde(default)]
+    pub multigrid_single_precision: bool,
     /// Relative residual tolerance of the PPE conjugate-gradient solver.
     #[serde(default = "default_ppe_tolerance")]
     pub ppe_tolerance: f64,
@@ -488,6 +495,7 @@ impl Default for Mps {
             adjoint_projection: false,
             ppe_preconditioner: PpePreconditioner::default(),
             multigrid_over_correction: default_multigrid_over_correction(),
+            multigrid_single_precision: false,
             yield_penalty_pa_s: 0.0,
             yield_max_iterations: default_yield_max_iterations(),
             yield_tolerance_1_s: default_yield_tolerance_1_s(),

@@ -128,6 +128,8 @@ pub struct SolverConfig<const D: usize> {
     pub multigrid_ppe: bool,
     /// Factor on the multigrid cycle's coarse-grid corrections (1: plain aggregation).
     pub multigrid_over_correction: f64,
+    /// The multigrid's finest smoothing reads the matrix in single precision.
+    pub multigrid_single_precision: bool,
     pub compressibility_1_pa: f64,
     pub collision_distance_m: f64,
     /// Collision distance between a fluid and a wall particle (see

@@ -26,7 +26,8 @@ pub struct CsrMatrix {
 impl CsrMatrix {
     /// Assembles `n` rows in parallel, in fixed chunks of rows (so no allocation per row):
     /// `row(k, columns, values)` appends the off-diagonal entries of row k and returns its
-    /// diagonal and one more value of the caller's per row.
+    /// diagonal and one more value of the caller's per row. The chunks are then copied side by
+    /// side into the matrix: only where they land depends on the sizes, never a value.
     pub fn assemble<T: Send>(
         n: usize,
         row: impl Fn(usize, &mut Vec<u32>, &mut Vec<f64>) -> (f64, T) + Sync,
@@ -41,8 +42,15 @@ impl CsrMatrix {
                 let mut ends = Vec::with_capacity(range.len());
                 let mut extra = Vec::with_capacity(range.len());
                 let (mut columns, mut values) = (Vec::new(), Vec::new());
-                for k in range {
+                for k in range.clone() {
                     let (d, t) = row(k, &mut columns, &mut values);
+                    if k == range.start {
+                        // Room for the chunk's rows at a quarter more than the first one's
+                        // length (neighbouring rows are alike), so that the vectors rarely grow.
+                        let guess = (columns.len() + 1) * range.len() * 5 / 4;
+                        columns.reserve(guess);
+                        values.reserve(guess);
+                    }
                     diagonal.push(d);
                     ends.push(columns.len());
                     extra.push(t);
@@ -50,21 +58,38 @@ impl CsrMatrix {
                 (diagonal, ends, columns, values, extra)
             })
             .collect();
+        let entries = chunks.iter().map(|c| c.2.len()).sum();
         let mut m = CsrMatrix {
             diagonal: Vec::with_capacity(n),
             row_offsets: Vec::with_capacity(n + 1),
-            columns: Vec::with_capacity(chunks.iter().map(|c| c.2.len()).sum()),
-            values: Vec::with_capacity(chunks.iter().map(|c| c.3.len()).sum()),
+            columns: vec![0; entries],
+            values: vec![0.0; entries],
             component_diagonal: Vec::new(),
         };
+        // Each chunk's entries into its own slice of the matrix, in parallel.
+        let mut targets = Vec::with_capacity(chunks.len());
+        let (mut columns, mut values) = (&mut m.columns[..], &mut m.values[..]);
+        for chunk in &chunks {
+            let (c, rest_c) = columns.split_at_mut(chunk.2.len());
+            let (v, rest_v) = values.split_at_mut(chunk.3.len());
+            targets.push((c, v));
+            (columns, values) = (rest_c, rest_v);
+        }
+        let sources: Vec<(&[u32], &[f64])> = chunks.iter().map(|c| (&c.2[..], &c.3[..])).collect();
+        sources
+            .into_par_iter()
+            .zip(targets)
+            .for_each(|((columns, values), (c, v))| {
+                c.copy_from_slice(columns);
+                v.copy_from_slice(values);
+            });
         m.row_offsets.push(0);
         let mut extras = Vec::with_capacity(n);
-        for (diagonal, ends, columns, values, extra) in chunks {
-            let base = m.columns.len();
+        let mut base = 0;
+        for (diagonal, ends, columns, _, extra) in chunks {
             m.diagonal.extend_from_slice(&diagonal);
             m.row_offsets.extend(ends.iter().map(|e| base + e));
-            m.columns.extend_from_slice(&columns);
-            m.values.extend_from_slice(&values);
+            base += columns.len();
             extras.extend(extra);
         }
         (m, extras)
@@ -161,6 +186,51 @@ impl CsrMatrix {
         first: usize,
         x: &[[f64; M]],
     ) -> [[f64; M]; R] {
+        self.rows_product_of::<f64, M, R, COMPONENTS>(&self.values, first, x)
+    }
+
+    /// Rows first..first + out.len() of A' x into `out`, where A' is this matrix with the
+    /// off-diagonal `values` in single precision (each widened exactly to f64 before its
+    /// product; the diagonal, the sums and the order of the terms are as in
+    /// [`CsrMatrix::products_into`]). A stand-in for A where an approximation serves (the
+    /// multigrid's smoother) and reading 4 bytes an entry less pays.
+    pub(crate) fn products_into_single(
+        &self,
+        values: &[f32],
+        first: usize,
+        x: &[f64],
+        out: &mut [f64],
+    ) {
+        debug_assert!(self.component_diagonal.is_empty());
+        let (x, _) = x.as_chunks::<1>();
+        let (out, _) = out.as_chunks_mut::<1>();
+        let mut groups = out.chunks_exact_mut(ROWS_SIDE_BY_SIDE);
+        let mut i = first;
+        for group in &mut groups {
+            group.copy_from_slice(
+                &self.rows_product_of::<f32, 1, ROWS_SIDE_BY_SIDE, false>(values, i, x),
+            );
+            i += ROWS_SIDE_BY_SIDE;
+        }
+        for (k, o) in groups.into_remainder().iter_mut().enumerate() {
+            *o = self.rows_product_of::<f32, 1, 1, false>(values, i + k, x)[0];
+        }
+    }
+
+    /// Rows first..first + R of A x with the off-diagonal entries `values` (`self.values`, or
+    /// a copy of them in another precision), each row's terms in its own order.
+    #[inline(always)]
+    fn rows_product_of<
+        V: Copy + Into<f64>,
+        const M: usize,
+        const R: usize,
+        const COMPONENTS: bool,
+    >(
+        &self,
+        values: &[V],
+        first: usize,
+        x: &[[f64; M]],
+    ) -> [[f64; M]; R] {
         let start: [usize; R] = std::array::from_fn(|k| self.row_offsets[first + k]);
         let end: [usize; R] = std::array::from_fn(|k| self.row_offsets[first + k + 1]);
         let mut s: [[f64; M]; R] = std::array::from_fn(|k| {
@@ -191,17 +261,16 @@ impl CsrMatrix {
         let common = (0..R).map(|k| end[k] - start[k]).min().unwrap_or(0);
         let columns: [&[u32]; R] =
             std::array::from_fn(|k| &self.columns[start[k]..start[k] + common]);
-        let values: [&[f64]; R] =
-            std::array::from_fn(|k| &self.values[start[k]..start[k] + common]);
+        let row_values: [&[V]; R] = std::array::from_fn(|k| &values[start[k]..start[k] + common]);
         for t in 0..common {
             for k in 0..R {
-                add(&mut s[k], columns[k][t], values[k][t]);
+                add(&mut s[k], columns[k][t], row_values[k][t].into());
             }
         }
         for k in 0..R {
             let range = start[k] + common..end[k];
-            for (&c, &v) in self.columns[range.clone()].iter().zip(&self.values[range]) {
-                add(&mut s[k], c, v);
+            for (&c, &v) in self.columns[range.clone()].iter().zip(&values[range]) {
+                add(&mut s[k], c, v.into());
             }
         }
         s

@@ -83,6 +83,7 @@ pub fn solver_config<const D: usize>(m: &Manifest, scene: &Scene<D>) -> SolverCo
         relaxation_coefficient: m.mps.relaxation_coefficient,
         multigrid_ppe: m.mps.ppe_preconditioner == PpePreconditioner::Multigrid,
         multigrid_over_correction: m.mps.multigrid_over_correction,
+        multigrid_single_precision: m.mps.multigrid_single_precision,
         source_term: match m.mps.source_term {
             PpeSource::NumberDensity => SourceTerm::NumberDensity,
             PpeSource::Mixed => SourceTerm::Mixed,

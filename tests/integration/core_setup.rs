@@ -58,6 +58,7 @@ pub fn config<const D: usize>(
         relaxation_coefficient: 0.2,
         source_term: SourceTerm::Mixed,
         multigrid_ppe: false,
+        multigrid_single_precision: false,
         multigrid_over_correction: 1.0,
         pressure_scheme: mps_runner::mps::PressureScheme::Standard,
         compression_relaxation: 0.01,

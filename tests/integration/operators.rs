@@ -303,7 +303,7 @@ fn multigrid_preconditioner_cuts_iterations_and_keeps_bits_across_threads() {
             .build()
             .unwrap();
         pool.install(|| {
-            let mg = Multigrid::new(&a, &cells, 1.0);
+            let mg = Multigrid::new(&a, &cells, 1.0, false);
             let pc = if multigrid {
                 Preconditioner::Multigrid(&mg)
             } else {
@@ -372,7 +372,7 @@ fn multigrid_over_correction_cuts_iterations_and_their_growth_with_size() {
     // most of it (docs/performance.md, "Multigrid over-correction"). 5-point Poisson, m x m.
     let iterations = |m: usize, over_correction: f64| {
         let (a, cells, x_true, b) = poisson_problem(m);
-        let mg = Multigrid::new(&a, &cells, over_correction);
+        let mg = Multigrid::new(&a, &cells, over_correction, false);
         let mut x = vec![[0.0]; m * m];
         let [report] = solve_pcg_many(
             &a,
@@ -401,4 +401,89 @@ fn multigrid_over_correction_cuts_iterations_and_their_growth_with_size() {
         over_large - over_small < plain_large - plain_small,
         "growth {over_small}->{over_large} vs {plain_small}->{plain_large}"
     );
+}
+
+#[test]
+fn a_single_precision_smoother_keeps_the_iterations_and_the_true_residual() {
+    // The 5-point Poisson matrix with its entries scaled by 0.1 and varied smoothly, so that no
+    // entry is exact in f32 (docs/performance.md, "A single-precision smoother"). The cycle
+    // whose finest smoothing reads the f32 copy must keep CG's iterations within one of the
+    // f64 cycle's, meet the tolerance on the f64 matrix, and give the same bits on 1 and 2
+    // threads.
+    let m = 128;
+    let (mut a, cells, x_true, _) = poisson_problem(m);
+    for i in 0..a.rows() {
+        for k in a.row_offsets[i]..a.row_offsets[i + 1] {
+            let j = a.columns[k] as usize;
+            // Symmetric in (i, j): the weight of the pair, from both ends' indices.
+            let w = 1.0 + 0.3 * (((i + j) % 17) as f64 / 17.0);
+            a.values[k] *= 0.1 * w;
+        }
+    }
+    // Weakly diagonally dominant rows, as the MPS Laplacian's are.
+    for i in 0..a.rows() {
+        let off: f64 = (a.row_offsets[i]..a.row_offsets[i + 1])
+            .map(|k| a.values[k].abs())
+            .sum();
+        a.diagonal[i] = off + 1e-3;
+    }
+    assert!(
+        a.values.iter().any(|&v| f64::from(v as f32) != v),
+        "some entry must differ in f32"
+    );
+    let b: Vec<[f64; 1]> = product(&a, &x_true).into_iter().map(|v| [v]).collect();
+    let tol = 1e-10;
+    let solve = |threads: usize, single: bool| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| {
+            let mg = Multigrid::new(&a, &cells, 1.5, single);
+            let mut x = vec![[0.0]; m * m];
+            let [report] =
+                solve_pcg_many(&a, &b, &mut x, tol, 10_000, Preconditioner::Multigrid(&mg));
+            (report, x)
+        })
+    };
+    let (double, x_double) = solve(2, false);
+    let (single1, x1) = solve(1, true);
+    let (single2, x2) = solve(2, true);
+    assert!(
+        double.converged && single1.converged,
+        "{double:?} {single1:?}"
+    );
+    eprintln!(
+        "iterations: f64 smoother {}, f32 smoother {}",
+        double.iterations, single1.iterations
+    );
+    assert!(
+        single1.iterations <= double.iterations + 1,
+        "f32 smoother {} vs f64 {} iterations",
+        single1.iterations,
+        double.iterations
+    );
+    // Another preconditioner: other bits, not the f64 path by mistake.
+    assert!(
+        x1.iter()
+            .zip(&x_double)
+            .any(|(p, q)| p[0].to_bits() != q[0].to_bits())
+    );
+    assert_eq!(single1, single2);
+    assert!(
+        x1.iter()
+            .zip(&x2)
+            .all(|(p, q)| p[0].to_bits() == q[0].to_bits())
+    );
+    // CG's own product is f64: the true residual on A meets the tolerance.
+    let x: Vec<f64> = x1.iter().map(|v| v[0]).collect();
+    let ax = product(&a, &x);
+    let r: f64 = ax
+        .iter()
+        .zip(&b)
+        .map(|(p, q)| (p - q[0]).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    let bn: f64 = b.iter().map(|v| v[0] * v[0]).sum::<f64>().sqrt();
+    assert!(r / bn < 10.0 * tol, "true residual {}", r / bn);
 }

@@ -239,7 +239,12 @@ impl<const D: usize> Solver<D> {
                     std::array::from_fn(|a| if a < D { (x[a] / l0).floor() as i64 } else { 0 })
                 })
                 .collect();
-            Multigrid::new(matrix, &cells, c.multigrid_over_correction)
+            Multigrid::new(
+                matrix,
+                &cells,
+                c.multigrid_over_correction,
+                c.multigrid_single_precision,
+            )
         });
         solve_pcg(
             matrix,
