@@ -8,7 +8,8 @@
 //! the coarse cycle (twice on each coarse level, a W-cycle, which plain aggregation needs),
 //! prolongation and Jacobi post-smoothing; the coarsest level is solved by a dense Cholesky
 //! factorisation. The cycle is a fixed symmetric positive definite linear operator, so CG
-//! stays plain CG.
+//! stays plain CG. Optionally the finest level's smoothing reads the matrix's entries rounded
+//! to f32 (bound by memory there; the cycle stays symmetric, CG's product stays f64).
 //!
 //! Determinism (docs/design.md section 6): aggregates follow from the cells alone; every coarse
 //! entry and every restricted value is summed over the members of an aggregate in ascending index
@@ -64,8 +65,8 @@ impl Multigrid {
     /// under-shoots smooth errors, and a factor above 1 makes up for it (over-correction, a
     /// known remedy for plain aggregation). The cycle stays a fixed symmetric operator.
     /// `single_precision`: the finest level's smoothing multiplies by the matrix with its
-    /// off-diagonal entries rounded to f32 (a symmetric matrix within 6e-8 of A, entry by
-    /// entry): that level's two products read 8 bytes an entry instead of 12, and the solve
+    /// off-diagonal entries rounded to f32 (still symmetric, each entry within a relative
+    /// 6e-8): that level's two products read 8 bytes an entry instead of 12, and the solve
     /// still converges to its tolerance on A, which CG's own product keeps in f64.
     pub fn new(
         fine: &CsrMatrix,
@@ -123,6 +124,22 @@ impl Multigrid {
         self.cycle(0, fine, &self.fine_inv_diagonal, r, z);
     }
 
+    /// residual = r - A z on `level`, with the single-precision values on the finest level
+    /// where the cycle was built with them.
+    fn residual_at(&self, level: usize, a: &CsrMatrix, z: &[f64], r: &[f64], residual: &mut [f64]) {
+        if level > 0 || self.fine_values_single.is_empty() {
+            residual_of(a, z, r, residual);
+            return;
+        }
+        let values = &self.fine_values_single;
+        for_row_blocks(residual, |first, out| {
+            a.products_into_single(values, first, z, out);
+            for (k, o) in out.iter_mut().enumerate() {
+                *o = r[first + k] - *o;
+            }
+        });
+    }
+
     fn cycle(&self, level: usize, a: &CsrMatrix, inv_diagonal: &[f64], r: &[f64], z: &mut [f64]) {
         if level == self.levels.len() {
             self.coarsest.solve(r, z);
@@ -162,24 +179,6 @@ impl Multigrid {
         self.residual_at(level, a, z, r, &mut residual);
         for_rows(z, |i, z| {
             *z += SMOOTHER_DAMPING * inv_diagonal[i] * residual[i]
-        });
-    }
-}
-
-impl Multigrid {
-    /// residual = r - A z on `level`, with the single-precision values on the finest level
-    /// where the cycle was built with them.
-    fn residual_at(&self, level: usize, a: &CsrMatrix, z: &[f64], r: &[f64], residual: &mut [f64]) {
-        if level > 0 || self.fine_values_single.is_empty() {
-            residual_of(a, z, r, residual);
-            return;
-        }
-        let values = &self.fine_values_single;
-        for_row_blocks(residual, |first, out| {
-            a.products_into_single(values, first, z, out);
-            for (k, o) in out.iter_mut().enumerate() {
-                *o = r[first + k] - *o;
-            }
         });
     }
 }
