@@ -77,16 +77,7 @@ impl Multigrid {
         assert_eq!(cells.len(), fine.rows());
         let fine_inv_diagonal = inverse(&fine.diagonal);
         let fine_values_single = if single_precision {
-            let mut single = vec![0.0f32; fine.values.len()];
-            single
-                .par_chunks_mut(ENTRIES_PER_TASK)
-                .zip(fine.values.par_chunks(ENTRIES_PER_TASK))
-                .for_each(|(out, values)| {
-                    for (o, &v) in out.iter_mut().zip(values) {
-                        *o = v as f32;
-                    }
-                });
-            single
+            fine.values.par_iter().map(|&v| v as f32).collect()
         } else {
             Vec::new()
         };
@@ -127,17 +118,9 @@ impl Multigrid {
     /// residual = r - A z on `level`, with the single-precision values on the finest level
     /// where the cycle was built with them.
     fn residual_at(&self, level: usize, a: &CsrMatrix, z: &[f64], r: &[f64], residual: &mut [f64]) {
-        if level > 0 || self.fine_values_single.is_empty() {
-            residual_of(a, z, r, residual);
-            return;
-        }
-        let values = &self.fine_values_single;
-        for_row_blocks(residual, |first, out| {
-            a.products_into_single(values, first, z, out);
-            for (k, o) in out.iter_mut().enumerate() {
-                *o = r[first + k] - *o;
-            }
-        });
+        let single = (level == 0 && !self.fine_values_single.is_empty())
+            .then_some(&self.fine_values_single[..]);
+        residual_of(a, single, z, r, residual);
     }
 
     fn cycle(&self, level: usize, a: &CsrMatrix, inv_diagonal: &[f64], r: &[f64], z: &mut [f64]) {
@@ -162,7 +145,7 @@ impl Multigrid {
         );
         if level + 1 < self.levels.len() {
             let mut r2 = vec![0.0; e.len()];
-            residual_of(&coarse.matrix, &e, &r_coarse, &mut r2);
+            residual_of(&coarse.matrix, None, &e, &r_coarse, &mut r2);
             let mut e2 = vec![0.0; e.len()];
             self.cycle(
                 level + 1,
@@ -271,13 +254,16 @@ impl Coarse {
     }
 }
 
-/// residual = r - A z, row by row.
-fn residual_of(a: &CsrMatrix, z: &[f64], r: &[f64], residual: &mut [f64]) {
+/// residual = r - A z, row by row; A's off-diagonal entries from `single` where given (f32
+/// copies of `a.values`).
+fn residual_of(a: &CsrMatrix, single: Option<&[f32]>, z: &[f64], r: &[f64], residual: &mut [f64]) {
     // A z by rows side by side (the bits of `row_value`), then r - A z.
-    let (z, _) = z.as_chunks::<1>();
+    let (z_rows, _) = z.as_chunks::<1>();
     for_row_blocks(residual, |first, out| {
-        let (az, _) = out.as_chunks_mut::<1>();
-        a.products_into(first, z, az);
+        match single {
+            Some(values) => a.products_into_single(values, first, z, out),
+            None => a.products_into(first, z_rows, out.as_chunks_mut::<1>().0),
+        }
         for (k, o) in out.iter_mut().enumerate() {
             *o = r[first + k] - *o;
         }
@@ -288,8 +274,6 @@ fn residual_of(a: &CsrMatrix, z: &[f64], r: &[f64], residual: &mut [f64]) {
 /// more than the work (coarse levels). Only scheduling: every row is computed alike.
 const PARALLEL_ROWS: usize = 2048;
 const ROWS_PER_TASK: usize = 1024;
-/// Matrix entries a task rounds to single precision.
-const ENTRIES_PER_TASK: usize = 1 << 16;
 
 /// out[i] = f(i, out[i]) for every row, in parallel on large levels.
 fn for_rows(out: &mut [f64], f: impl Fn(usize, &mut f64) + Sync) {
