@@ -68,6 +68,12 @@ pub fn run_in(resolved: &Resolved, out_dir: &Path, threads: usize) -> RunResult 
     .expect("run")
 }
 
+/// f() on a worker pool of `threads` threads, the one runs use (`run::thread_pool`).
+pub fn on_threads<R: Send>(threads: usize, f: impl FnOnce() -> R + Send) -> R {
+    let (pool, _) = mps_runner::run::thread_pool(Some(threads)).expect("a thread pool");
+    pool.install(f)
+}
+
 /// Runs and asserts that the run completed (its reason otherwise).
 pub fn run_completed(resolved: &Resolved, out_dir: &Path, threads: usize) -> RunResult {
     let result = run_in(resolved, out_dir, threads);

@@ -1,4 +1,5 @@
 //! MPS operators on a regular lattice against exact values (docs/design.md section 3).
+use crate::common;
 use mps_runner::mps::Vector;
 use mps_runner::mps::grid::Neighbours;
 use mps_runner::mps::kernel::{RefValues, weight};
@@ -298,7 +299,7 @@ fn multigrid_preconditioner_cuts_iterations_and_keeps_bits_across_threads() {
     let n = m * m;
     let tol = 1e-10;
     let solve = |threads: usize, multigrid: bool| {
-        on_threads(threads, || {
+        common::on_threads(threads, || {
             let mg = Multigrid::new(&a, &cells, 1.0, false);
             let pc = if multigrid {
                 Preconditioner::Multigrid(&mg)
@@ -340,15 +341,6 @@ fn true_relative_residual(a: &CsrMatrix, x: &[[f64; 1]], b: &[[f64; 1]]) -> f64 
         .sum::<f64>()
         .sqrt();
     r / b.iter().map(|v| v[0] * v[0]).sum::<f64>().sqrt()
-}
-
-/// f() on a pool of `threads` workers.
-fn on_threads<R: Send>(threads: usize, f: impl FnOnce() -> R + Send) -> R {
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .unwrap();
-    pool.install(f)
 }
 
 /// Whether two solutions are the same bits, entry by entry.
@@ -446,7 +438,7 @@ fn a_single_precision_smoother_keeps_the_iterations_and_the_true_residual() {
     let b: Vec<[f64; 1]> = product(&a, &x_true).into_iter().map(|v| [v]).collect();
     let tol = 1e-10;
     let solve = |threads: usize, single: bool| {
-        on_threads(threads, || {
+        common::on_threads(threads, || {
             let mg = Multigrid::new(&a, &cells, 1.5, single);
             let mut x = vec![[0.0]; m * m];
             let [report] =

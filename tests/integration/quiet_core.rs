@@ -2,7 +2,7 @@
 //! for linear fields on any arrangement, and a tank at rest stays at rest under it, in 2D and
 //! 3D, where the standard scheme stirs itself (issue "A quiet core", docs/validation.md
 //! "Holding still").
-use crate::core_setup;
+use crate::{common, core_setup};
 
 use core_setup::{advance, config, walled_box};
 use mps_runner::mps::grid::Neighbours;
@@ -303,16 +303,10 @@ fn deep_narrow_column_with(configure: impl Fn(&mut SolverConfig<2>, f64)) -> (f6
 #[test]
 fn exact_projection_holds_a_deep_narrow_column_without_stabilisers() {
     let exact = |cfg: &mut SolverConfig<2>, _l0: f64| cfg.exact_projection = true;
-    let pool = |threads: usize| {
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap()
-    };
-    let (speed, bits) = pool(1).install(|| deep_narrow_column_with(exact));
+    let (speed, bits) = common::on_threads(1, || deep_narrow_column_with(exact));
     eprintln!("deep column, exact projection: max speed {speed:.3e} m/s");
     assert!(speed < 1e-4, "max speed {speed:.3e} m/s");
-    let (_, two) = pool(2).install(|| deep_narrow_column_with(exact));
+    let (_, two) = common::on_threads(2, || deep_narrow_column_with(exact));
     assert_eq!(bits, two, "positions differ between 1 and 2 threads");
     // The same column with the Laplacian-model increment and no stabiliser fails.
     let (plain, _) = deep_narrow_column_with(|_, _| {});
