@@ -67,9 +67,12 @@ impl MirrorPlanes {
     }
 }
 
-/// Neighbour lists in compressed rows: the neighbours of i are
-/// `indices[offsets[i]..offsets[i + 1]]`, in ascending index order (then mirror images,
-/// see [`MirrorPlanes`], by plane bits and then by index). Entries are read with
+/// Neighbour lists in rows: the neighbours of i are `indices[offsets[i]..ends[i]]`, in
+/// ascending index order (then mirror images, see [`MirrorPlanes`], by plane bits and then by
+/// index). Rows follow one another in index order; built lists are compressed (`ends[i] ==
+/// offsets[i + 1]`), while the kernel-pair cut ([`KernelPairs`]) leaves each row where its
+/// candidates were, with unused entries between rows, so that no serial pass has to move
+/// them together (`offsets[n]` is then the extent of the rows). Entries are read with
 /// [`entry_index`], [`Neighbours::displacement`] and [`Neighbours::reflect`].
 #[derive(Debug, Clone, Default)]
 pub struct Neighbours {
@@ -78,13 +81,42 @@ pub struct Neighbours {
     pub period_x_m: Option<f64>,
     pub mirror: MirrorPlanes,
     pub offsets: Vec<usize>,
+    pub ends: Vec<usize>,
     pub indices: Vec<u32>,
 }
 
 impl Neighbours {
     #[inline]
     pub fn of(&self, i: usize) -> &[u32] {
-        &self.indices[self.offsets[i]..self.offsets[i + 1]]
+        &self.indices[self.offsets[i]..self.ends[i]]
+    }
+
+    /// The number of entries in all rows.
+    pub fn entry_count(&self) -> usize {
+        self.offsets
+            .iter()
+            .zip(&self.ends)
+            .map(|(a, b)| b - a)
+            .sum()
+    }
+
+    /// Compressed rows from their offsets (row i ends where row i + 1 starts).
+    fn compressed(
+        cutoff_m: f64,
+        period_x_m: Option<f64>,
+        mirror: MirrorPlanes,
+        offsets: Vec<usize>,
+        indices: Vec<u32>,
+    ) -> Self {
+        let ends = offsets[1..].to_vec();
+        Self {
+            cutoff_m,
+            period_x_m,
+            mirror,
+            offsets,
+            ends,
+            indices,
+        }
     }
 
     /// r_ij = r_j - r_i for list entry `e` of i: the nearest periodic image along x when x is
@@ -210,15 +242,19 @@ impl Neighbours {
         let n = self.offsets.len() - 1;
         // Each row's pairs are written where the row lies in `self` (room for every
         // candidate, without a branch per pair: about a third fail, in no predictable
-        // pattern), in parallel over fixed chunks of rows, then moved together.
+        // pattern), in parallel over fixed chunks of rows, and stay there: the rows keep
+        // the gaps between them (see `Neighbours`).
         let total = self.offsets[n];
         let (mut outer, mut inner) = reuse;
-        for buffer in [&mut outer.indices, &mut inner.indices] {
-            if buffer.len() < total {
-                buffer.resize(total, 0);
+        for lists in [&mut outer, &mut inner] {
+            // Grown, never shrunk: what lies past the rows is never read.
+            if lists.indices.len() < total {
+                lists.indices.resize(total, 0);
             }
+            lists.offsets.resize(n + 1, 0);
+            lists.offsets[n] = total;
+            lists.ends.resize(n, 0);
         }
-        let (mut counts_outer, mut counts_inner) = (vec![0usize; n], vec![0usize; n]);
         let chunk_rows = |chunk: usize| chunk * FILTER_CHUNK..((chunk + 1) * FILTER_CHUNK).min(n);
         let chunks = n.div_ceil(FILTER_CHUNK);
         let mut regions = Vec::with_capacity(chunks);
@@ -234,88 +270,79 @@ impl Neighbours {
         }
         regions
             .into_par_iter()
-            .zip(counts_outer.par_chunks_mut(FILTER_CHUNK))
-            .zip(counts_inner.par_chunks_mut(FILTER_CHUNK))
+            .zip(outer.offsets[..n].par_chunks_mut(FILTER_CHUNK))
+            .zip(outer.ends.par_chunks_mut(FILTER_CHUNK))
+            .zip(inner.offsets[..n].par_chunks_mut(FILTER_CHUNK))
+            .zip(inner.ends.par_chunks_mut(FILTER_CHUNK))
             .with_max_len(1)
-            .for_each(|(((rows, outer, inner), counts_outer), counts_inner)| {
-                let (mut len_outer, mut len_inner) = (0, 0);
-                for (k, i) in rows.enumerate() {
-                    let before = (len_outer, len_inner);
-                    let how = cut(i);
-                    if how != Cut::Never {
-                        let row = self.of(i);
-                        // Without a period, the plain entries (mirror images come last, see
-                        // `Neighbours`) are cut in a loop of their own.
-                        debug_assert!(row.is_sorted(), "row {i} out of order");
-                        let plain = if self.period_x_m.is_none() {
-                            row.partition_point(|&e| e >> MIRROR_SHIFT == 0)
-                        } else {
-                            0
-                        };
-                        let (o, n_in) = cut_plain_row(
-                            &row[..plain],
-                            positions[i],
-                            positions,
-                            (outer2, inner2),
-                            &mut outer[len_outer..len_outer + plain],
-                            &mut inner[len_inner..len_inner + plain],
-                        );
-                        len_outer += o;
-                        len_inner += n_in;
-                        for &j in &row[plain..] {
-                            let d2 = self.displacement(positions, i, j).norm_squared();
-                            outer[len_outer] = j;
-                            inner[len_inner] = j;
-                            len_outer += usize::from(d2 > 0.0 && d2 < outer2);
-                            len_inner += usize::from(d2 > 0.0 && d2 < inner2);
+            .for_each(
+                |(
+                    ((((rows, outer, inner), starts_outer), ends_outer), starts_inner),
+                    ends_inner,
+                )| {
+                    let base = self.offsets[rows.start];
+                    let (mut len_outer, mut len_inner) = (0, 0);
+                    for (k, i) in rows.enumerate() {
+                        let before = (len_outer, len_inner);
+                        let how = cut(i);
+                        if how != Cut::Never {
+                            let row = self.of(i);
+                            // Without a period, the plain entries (mirror images come last,
+                            // see `Neighbours`) are cut in a loop of their own.
+                            debug_assert!(row.is_sorted(), "row {i} out of order");
+                            let plain = if self.period_x_m.is_none() {
+                                row.partition_point(|&e| e >> MIRROR_SHIFT == 0)
+                            } else {
+                                0
+                            };
+                            let (o, n_in) = cut_plain_row(
+                                &row[..plain],
+                                positions[i],
+                                positions,
+                                (outer2, inner2),
+                                &mut outer[len_outer..len_outer + plain],
+                                &mut inner[len_inner..len_inner + plain],
+                            );
+                            len_outer += o;
+                            len_inner += n_in;
+                            for &j in &row[plain..] {
+                                let d2 = self.displacement(positions, i, j).norm_squared();
+                                outer[len_outer] = j;
+                                inner[len_inner] = j;
+                                len_outer += usize::from(d2 > 0.0 && d2 < outer2);
+                                len_inner += usize::from(d2 > 0.0 && d2 < inner2);
+                            }
+                            // The kept pairs within the outer radius name any fluid there
+                            // (from the end: poured fluid comes last).
+                            if how == Cut::IfFluidWithin
+                                && !outer[before.0..len_outer]
+                                    .iter()
+                                    .rev()
+                                    .any(|&j| is_fluid(entry_index(j)))
+                            {
+                                (len_outer, len_inner) = before;
+                            }
                         }
-                        // The kept pairs within the outer radius name any fluid there (from
-                        // the end: poured fluid comes last).
-                        if how == Cut::IfFluidWithin
-                            && !outer[before.0..len_outer]
-                                .iter()
-                                .rev()
-                                .any(|&j| is_fluid(entry_index(j)))
-                        {
-                            (len_outer, len_inner) = before;
-                        }
+                        (starts_outer[k], ends_outer[k]) = (base + before.0, base + len_outer);
+                        (starts_inner[k], ends_inner[k]) = (base + before.1, base + len_inner);
                     }
-                    counts_outer[k] = len_outer - before.0;
-                    counts_inner[k] = len_inner - before.1;
-                }
-            });
-        // Each chunk's pairs moved down to follow the last: a chunk's pairs start where its
-        // rows start in `self`, at or after where they go.
-        let gather = |lists: &mut Self, counts: &[usize], cutoff_m: f64| {
-            lists.offsets.clear();
-            lists.offsets.reserve(n + 1);
-            lists.offsets.push(0);
-            let mut end = 0;
-            for chunk in 0..chunks {
-                let rows = chunk_rows(chunk);
-                let from = self.offsets[rows.start];
-                let kept: usize = counts[rows.clone()].iter().sum();
-                lists.indices.copy_within(from..from + kept, end);
-                for &c in &counts[rows] {
-                    end += c;
-                    lists.offsets.push(end);
-                }
-            }
-            lists.indices.truncate(end);
+                },
+            );
+        for (lists, cutoff_m) in [(&mut outer, outer_m), (&mut inner, inner_m)] {
             lists.cutoff_m = cutoff_m;
             lists.period_x_m = self.period_x_m;
             lists.mirror = self.mirror;
-        };
-        gather(&mut outer, &counts_outer, outer_m);
-        gather(&mut inner, &counts_inner, inner_m);
+        }
         (outer, inner)
     }
 
     /// Marks every particle that is in some list, over `n` particles.
     pub fn listed(&self, n: usize) -> Vec<bool> {
         let mut mark = vec![false; n];
-        for &j in &self.indices {
-            mark[entry_index(j)] = true;
+        for i in 0..self.ends.len() {
+            for &j in self.of(i) {
+                mark[entry_index(j)] = true;
+            }
         }
         mark
     }
@@ -333,13 +360,13 @@ impl Neighbours {
             indices.extend_from_slice(if own.is_empty() { other.of(i) } else { own });
             offsets.push(indices.len());
         }
-        Self {
-            cutoff_m: self.cutoff_m,
-            period_x_m: self.period_x_m,
-            mirror: self.mirror,
+        Self::compressed(
+            self.cutoff_m,
+            self.period_x_m,
+            self.mirror,
             offsets,
             indices,
-        }
+        )
     }
 
     /// Lists of `rows` rows, row k's entries appended by `row(k, list)`, in parallel over
@@ -384,13 +411,7 @@ impl Neighbours {
             }
             indices.extend_from_slice(&list);
         }
-        Self {
-            cutoff_m,
-            period_x_m,
-            mirror,
-            offsets,
-            indices,
-        }
+        Self::compressed(cutoff_m, period_x_m, mirror, offsets, indices)
     }
 
     /// As [`Neighbours::build`] with x periodic of period `period_x_m` (all particles must lie
@@ -460,6 +481,7 @@ impl Neighbours {
         let mut lists = first.merged(&second);
         // Images have no lists of their own (they are last); their entries name the source.
         lists.offsets.truncate(n + 1);
+        lists.ends.truncate(n);
         for e in &mut lists.indices {
             if *e as usize >= n {
                 *e = images[*e as usize - n];
@@ -710,6 +732,7 @@ impl<const D: usize> CellGrid<D> {
             period_x_m: self.period_x_m,
             mirror: MirrorPlanes::default(),
             offsets: Vec::new(),
+            ends: Vec::new(),
             indices: Vec::new(),
         };
         let wrap = self.period_x_m.is_some();
@@ -1275,11 +1298,11 @@ mod tests {
             "{walls_kept} {walls_dropped}"
         );
         // Each radius cut some entries, and the coincident pair is not one.
-        assert!(fresh.near.indices.len() < fresh.lap.indices.len());
-        assert!(fresh.lap.indices.len() < lists.indices.len());
+        assert!(fresh.near.entry_count() < fresh.lap.entry_count());
+        assert!(fresh.lap.entry_count() < lists.entry_count());
         assert!(lists.of(0).contains(&1) && !fresh.lap.of(0).contains(&1));
         if !mirror.is_empty() {
-            assert!(fresh.lap.indices.iter().any(|&e| e >> MIRROR_SHIFT != 0));
+            assert!((0..n).any(|i| fresh.lap.of(i).iter().any(|&e| e >> MIRROR_SHIFT != 0)));
         }
     }
 
