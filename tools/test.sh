@@ -13,7 +13,11 @@ export MPS_PYTHON="$PWD/.venv/bin/python"
 if [ ! -d tools/foxglove/node_modules ]; then
     npm ci --prefix tools/foxglove --no-audit --no-fund --silent
 fi
-cargo test --release -- --include-ignored
+# The library, binary and integration tests; not the examples, whose release builds (each
+# instantiating the generic solver again) would take more CPU than all of the library's tests
+# build: they are checked below instead, which needs no code generation.
+cargo test --release --lib --bins --tests -- --include-ignored
+cargo check --release --examples --quiet
 # `cargo test` has built target/release/runner for the integration tests; a separate `cargo
 # build` would compile the library once more (without the dev-dependencies' features).
 
