@@ -181,6 +181,15 @@ fn runner_option_measures_the_given_binary() {
         !stdout.contains("| spacing m |"),
         "no scaling series in this suite: {stdout}"
     );
+    // The progress lines give every stage's seconds, not only the table's three shares.
+    let stage_rows: Vec<&str> = stderr
+        .lines()
+        .skip_while(|l| !l.starts_with("    stage "))
+        .skip(1)
+        .take_while(|l| l.starts_with("    ") && l.ends_with('%'))
+        .collect();
+    assert_eq!(stage_rows.len(), 7, "{stderr}");
+    assert!(stage_rows[4].starts_with("    PPE solve (CG "), "{stderr}");
 }
 
 #[test]

@@ -190,6 +190,11 @@ fn bench_case(case: &Case, runner: &Runner, args: &SuiteArgs, label: &str) -> (C
         row.stages = table::largest_stages(&r.stages);
         row.outcome = r.outcome;
     }
+    // Every stage's seconds, which the table's three largest shares do not give (comparing
+    // thread counts stage by stage needs them).
+    for line in child::stage_table(&measured.stdout) {
+        eprintln!("    {line}");
+    }
     finish_row(row, &measured)
 }
 

@@ -177,6 +177,18 @@ pub fn parse_bench(stdout: &str) -> Option<BenchReport> {
     })
 }
 
+/// The stage table of `runner bench`'s report as printed: its header and its stage rows
+/// (empty when there is none), for the suite's progress lines.
+pub fn stage_table(stdout: &str) -> Vec<&str> {
+    let mut lines = stdout.lines().skip_while(|l| !l.starts_with("stage "));
+    let Some(header) = lines.next() else {
+        return Vec::new();
+    };
+    std::iter::once(header)
+        .chain(lines.take_while(|l| stage_line(l).is_some()))
+        .collect()
+}
+
 /// `NAME   SECONDS   SHARE%`: the name may hold spaces, so the two numbers are taken from the
 /// right.
 fn stage_line(line: &str) -> Option<(String, f64)> {
@@ -237,5 +249,15 @@ recording and output                               0.002   27.6%
     #[test]
     fn no_report_without_its_lines() {
         assert_eq!(parse_bench("error: no such file\n"), None);
+        assert!(stage_table("error: no such file\n").is_empty());
+    }
+
+    #[test]
+    fn the_stage_table_is_its_header_and_rows() {
+        let stdout = format!("{REPORT}/tmp/x.mcap\n");
+        let table = stage_table(&stdout);
+        assert_eq!(table.len(), 5, "{table:?}");
+        assert!(table[0].starts_with("stage "));
+        assert!(table[4].starts_with("recording and output "));
     }
 }
