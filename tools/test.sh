@@ -13,9 +13,9 @@ export MPS_PYTHON="$PWD/.venv/bin/python"
 if [ ! -d tools/foxglove/node_modules ]; then
     npm ci --prefix tools/foxglove --no-audit --no-fund --silent
 fi
-# The library, binary and integration tests; not the examples, whose release builds (each
-# instantiating the generic solver again) would take more CPU than all of the library's tests
-# build: they are checked below instead, which needs no code generation.
+# The library, binary and integration tests; not the examples, whose release builds each
+# instantiate the generic solver again (200 s of CPU, more than the unit and integration tests'
+# 140 s; docs/tests.md): they are checked below instead, which needs no code generation.
 cargo test --release --lib --bins --tests -- --include-ignored
 cargo check --release --examples --quiet
 # `cargo test` has built target/release/runner for the integration tests; a separate `cargo
