@@ -162,8 +162,8 @@ pub fn parse_bench(stdout: &str) -> Option<BenchReport> {
     let outcome = result.strip_prefix("outcome ")?.split(';').next()?.trim();
     let wall_s = number_after(result, "wall time ")?;
     let particle_steps_per_s = number_before(result, " particle-steps/s")?;
-    let stages = lines
-        .skip_while(|l| !l.starts_with("stage "))
+    let stages = stage_table(stdout)
+        .into_iter()
         .skip(1)
         .map_while(stage_line)
         .collect();
@@ -178,9 +178,14 @@ pub fn parse_bench(stdout: &str) -> Option<BenchReport> {
 }
 
 /// The stage table of `runner bench`'s report as printed: its header and its stage rows
-/// (empty when there is none), for the suite's progress lines.
+/// (empty when there is none). It follows the `outcome` line, so a run named "stage" does
+/// not start it.
 pub fn stage_table(stdout: &str) -> Vec<&str> {
-    let mut lines = stdout.lines().skip_while(|l| !l.starts_with("stage "));
+    let mut lines = stdout
+        .lines()
+        .skip_while(|l| !l.starts_with("outcome "))
+        .skip(1)
+        .skip_while(|l| !l.starts_with("stage "));
     let Some(header) = lines.next() else {
         return Vec::new();
     };
@@ -259,5 +264,8 @@ recording and output                               0.002   27.6%
         assert_eq!(table.len(), 5, "{table:?}");
         assert!(table[0].starts_with("stage "));
         assert!(table[4].starts_with("recording and output "));
+        // A run named "stage" is not the table's header.
+        let named = REPORT.replacen("smoke_2d (", "stage (", 1);
+        assert_eq!(stage_table(&named), stage_table(REPORT));
     }
 }
