@@ -444,24 +444,7 @@ impl Neighbours {
             let second = grid.lists(positions, &active, &|i: usize| listed[i] && then(i));
             return first.merged(&second);
         }
-        // The images, appended after the particles in a fixed order (plane bits, then index),
-        // so that a list's order does not depend on which images existed when it was built.
-        let mut extended = positions.to_vec();
-        let mut images: Vec<u32> = Vec::new();
-        for planes in mirror.combinations() {
-            for (j, x) in positions.iter().enumerate() {
-                let near = MirrorPlanes::axes_of::<D>(planes)
-                    .all(|a| x[a] - mirror.position_m[a] < cutoff_m);
-                if near && active(j) {
-                    extended.push(mirror.reflect_point(planes, *x));
-                    images.push(j as u32 | planes << MIRROR_SHIFT);
-                }
-            }
-        }
-        assert!(
-            extended.len() <= MAX_PARTICLES,
-            "too many particles with mirror images"
-        );
+        let (extended, images) = Self::with_images(positions, cutoff_m, mirror, &active);
         let active = |k: usize| k >= n || active(k);
         let grid = CellGrid::new(&extended, cutoff_m, period_x_m);
         let first = grid.lists(&extended, &active, &|k: usize| k < n && centre(k));
@@ -482,12 +465,43 @@ impl Neighbours {
         lists
     }
 
-    /// The lists that [`Neighbours::build_centres_then_listed`] (without mirror planes) gives
-    /// at `positions`, from `self`, these lists at positions that differ only at the
-    /// particles `moved` (ascending and active; every particle past `self`'s count among them;
-    /// no particle's `active`, `centre` or `then` changed). Only the moved particles are
-    /// searched in the cell grid; every other list is `self`'s, the moved entries taken out
-    /// and their new ones merged in, so the cost follows the moved particles, not all of them.
+    /// The points the lists with mirror planes are searched among: the particles, then the
+    /// mirror images of the active ones closer than the cutoff to the planes, in a fixed order
+    /// (plane bits, then index), so that a list's order does not depend on which images
+    /// existed when it was built. The second vector names each image as a list entry (its
+    /// source's index with its plane bits), ascending.
+    fn with_images<const D: usize>(
+        positions: &[Vector<D>],
+        cutoff_m: f64,
+        mirror: MirrorPlanes,
+        active: &impl Fn(usize) -> bool,
+    ) -> (Vec<Vector<D>>, Vec<u32>) {
+        let mut extended = positions.to_vec();
+        let mut images: Vec<u32> = Vec::new();
+        for planes in mirror.combinations() {
+            for (j, x) in positions.iter().enumerate() {
+                let near = MirrorPlanes::axes_of::<D>(planes)
+                    .all(|a| x[a] - mirror.position_m[a] < cutoff_m);
+                if near && active(j) {
+                    extended.push(mirror.reflect_point(planes, *x));
+                    images.push(j as u32 | planes << MIRROR_SHIFT);
+                }
+            }
+        }
+        assert!(
+            extended.len() <= MAX_PARTICLES,
+            "too many particles with mirror images"
+        );
+        (extended, images)
+    }
+
+    /// The lists that [`Neighbours::build_centres_then_listed`] gives at `positions` (with
+    /// `self`'s period and mirror planes), from `self`, these lists at positions that differ
+    /// only at the particles `moved` (ascending and active; every particle past `self`'s
+    /// count among them; no particle's `active`, `centre` or `then` changed). Only the moved
+    /// particles (and their mirror images) are searched in the cell grid; every other list is
+    /// `self`'s, the moved entries taken out and their new ones merged in, so the cost follows
+    /// the moved particles, not all of them.
     pub fn updated<const D: usize>(
         &self,
         positions: &[Vector<D>],
@@ -496,10 +510,6 @@ impl Neighbours {
         centre: impl Fn(usize) -> bool + Sync,
         then: impl Fn(usize) -> bool + Sync,
     ) -> Self {
-        assert!(
-            self.mirror.is_empty(),
-            "lists with mirror images are built whole"
-        );
         let n = positions.len();
         let listed_before = self.offsets.len() - 1;
         debug_assert!(moved.windows(2).all(|w| w[0] < w[1]));
@@ -513,38 +523,93 @@ impl Neighbours {
         for (k, &s) in moved.iter().enumerate() {
             row_of[s as usize] = k as u32;
         }
-        let is_moved = |j: u32| row_of[j as usize] != NOT_MOVED;
-        let grid = CellGrid::new(positions, self.cutoff_m, self.period_x_m);
-        // Every moved particle's neighbours (row k: particle moved[k]), holder or not: they
-        // are also where the moved particle enters the others' lists (the cut is symmetric).
+        let is_moved = |e: u32| row_of[entry_index(e)] != NOT_MOVED;
+        // The points searched: the particles, then the images (none without planes), as the
+        // whole build has them; a point's entry is its index, or its image's name.
+        let (extended, images) = Self::with_images(positions, self.cutoff_m, self.mirror, &active);
+        let active_point = |k: usize| k >= n || active(k);
+        let entry_of = |k: u32| {
+            if (k as usize) < n {
+                k
+            } else {
+                images[k as usize - n]
+            }
+        };
+        let grid = CellGrid::new(&extended, self.cutoff_m, self.period_x_m);
+        // The entries within the cutoff of the points `subset` (row k: point subset[k]),
+        // ascending: the images keep the order of their points.
         let searched = |subset: &[u32]| {
             Self::by_rows(
                 subset.len(),
                 self.cutoff_m,
                 self.period_x_m,
                 self.mirror,
-                |k, list| grid.append_neighbours(positions, subset[k] as usize, &active, list),
+                |k, list| {
+                    let before = list.len();
+                    grid.append_neighbours(&extended, subset[k] as usize, &active_point, list);
+                    for e in &mut list[before..] {
+                        *e = entry_of(*e);
+                    }
+                },
             )
         };
+        // Every moved particle's neighbours, holder or not: they are also where the moved
+        // particle enters the others' lists (the cut is symmetric).
         let moved_lists = searched(moved);
-        // The moved entries each particle gains, ascending (moved is ascending).
+        // A moved particle's image enters the lists of the particles within the cutoff of
+        // the image: searched from the image's point, one plane combination at a time.
+        let mut image_rows: Vec<(u32, Neighbours)> = Vec::new();
+        for planes in self.mirror.combinations() {
+            let points: Vec<u32> = moved
+                .iter()
+                .filter_map(|&s| {
+                    images
+                        .binary_search(&(s | planes << MIRROR_SHIFT))
+                        .ok()
+                        .map(|k| (n + k) as u32)
+                })
+                .collect();
+            image_rows.push((planes, searched(&points)));
+        }
+        // The entries of moved particles (and their images) each particle gains, ascending:
+        // the plain ones first (moved is ascending), then by plane bits.
+        let plain = |e: &u32| *e >> MIRROR_SHIFT == 0;
+        let mut gains: Vec<(u32, u32)> = Vec::new();
+        for (k, &s) in moved.iter().enumerate() {
+            gains.extend(
+                moved_lists
+                    .of(k)
+                    .iter()
+                    .filter(|e| plain(e))
+                    .map(|&i| (i, s)),
+            );
+        }
+        for (planes, rows) in &image_rows {
+            let sources = moved
+                .iter()
+                .filter(|&&s| images.binary_search(&(s | planes << MIRROR_SHIFT)).is_ok());
+            for (k, &s) in sources.enumerate() {
+                let e = s | planes << MIRROR_SHIFT;
+                gains.extend(rows.of(k).iter().filter(|e| plain(e)).map(|&i| (i, e)));
+            }
+        }
         let mut gained_offsets = vec![0usize; n + 1];
-        for &j in &moved_lists.indices {
-            gained_offsets[j as usize + 1] += 1;
+        for &(i, _) in &gains {
+            gained_offsets[i as usize + 1] += 1;
         }
         for i in 0..n {
             gained_offsets[i + 1] += gained_offsets[i];
         }
         let mut fill = gained_offsets.clone();
-        let mut gained = vec![0u32; moved_lists.indices.len()];
-        for (k, &s) in moved.iter().enumerate() {
-            for &j in moved_lists.of(k) {
-                gained[fill[j as usize]] = s;
-                fill[j as usize] += 1;
-            }
+        let mut gained = vec![0u32; gains.len()];
+        for &(i, e) in &gains {
+            gained[fill[i as usize]] = e;
+            fill[i as usize] += 1;
         }
         let gained_of = |i: usize| &gained[gained_offsets[i]..gained_offsets[i + 1]];
-        let is_centre = |j: u32| active(j as usize) && centre(j as usize);
+        // A particle holds a list for the centres whose own lists hold it, so only a centre's
+        // plain entry counts (an image is never a centre).
+        let is_centre = |e: u32| plain(&e) && active(e as usize) && centre(e as usize);
         // A `then` particle has a list when some centre lies within the cutoff: one that did
         // not move and was in its list, or a moved one that now is.
         let holds_list = |i: usize| {
@@ -561,10 +626,10 @@ impl Neighbours {
                 return moved_lists
                     .of(row_of[i] as usize)
                     .iter()
-                    .any(|&j| is_centre(j));
+                    .any(|&e| is_centre(e));
             }
-            let kept = self.of(i).iter().any(|&j| !is_moved(j) && is_centre(j));
-            kept || gained_of(i).iter().any(|&j| is_centre(j))
+            let kept = self.of(i).iter().any(|&e| !is_moved(e) && is_centre(e));
+            kept || gained_of(i).iter().any(|&e| is_centre(e))
         };
         // Particles that did not move (so were listed before) and hold a list now but held
         // none: searched whole. A centre always held its (possibly empty) list.
@@ -587,7 +652,7 @@ impl Neighbours {
                 list.extend_from_slice(new_holder_lists.of(k));
             } else {
                 // Both ascending: merge the kept entries with the gained ones.
-                let kept = self.of(i).iter().filter(|&&j| !is_moved(j));
+                let kept = self.of(i).iter().filter(|&&e| !is_moved(e));
                 merge_ascending(kept.copied(), gained_of(i), list);
             }
         })
@@ -1121,9 +1186,14 @@ mod tests {
     }
 
     /// An update equals the whole build at the new positions, entry for entry, in 2D and 3D,
-    /// periodic or not: fluid moved (some far, into walls' reach and out of it), walls moved,
-    /// particles appended, a ghost that never gets a list.
-    fn check_update_equals_build<const D: usize>(period_x_m: Option<f64>, seed: u64) {
+    /// periodic or not, with mirror planes or not: fluid moved (some far, into walls' reach
+    /// and out of it, towards a plane and away from it), walls moved, particles appended, a
+    /// ghost that never gets a list.
+    fn check_update_equals_build<const D: usize>(
+        period_x_m: Option<f64>,
+        mirror: MirrorPlanes,
+        seed: u64,
+    ) {
         let mut rng = crate::rng::SplitMix64::new(seed);
         // A few neighbours each, so that some walls have no fluid in reach.
         let (n0, added) = (900usize, 40usize);
@@ -1138,12 +1208,23 @@ mod tests {
         after.extend((0..added).map(|_| point(&mut rng)));
         let mut moved: Vec<u32> = Vec::new();
         for i in 0..n0 + added {
-            let far = rng.unit() < 0.1;
+            // Half the particles within two cutoffs of a plane move, and a third of the moved
+            // ones go next to a plane: images appear, vanish and move.
+            let near_plane = |x: &Vector<D>| {
+                MirrorPlanes::axes_of::<D>(mirror.axes)
+                    .any(|a| x[a] - mirror.position_m[a] < 2.0 * cutoff_m)
+            };
+            let far = i < n0 && (rng.unit() < 0.1 || (near_plane(&before[i]) && rng.unit() < 0.5));
             if (i >= n0 || far) && kinds[i] != 3 {
                 if i < n0 {
                     // Up to two cutoffs in any direction, kept inside the box.
                     let step = Vector::<D>::from_fn(|_, _| (rng.unit() - 0.5) * 4.0 * cutoff_m);
                     after[i] = (after[i] + step).map(|x| x.clamp(0.0, side_m * 0.999));
+                    if let Some(a) = MirrorPlanes::axes_of::<D>(mirror.axes).next()
+                        && rng.unit() < 1.0 / 3.0
+                    {
+                        after[i][a] = mirror.position_m[a].max(0.0) + cutoff_m * rng.unit();
+                    }
                 }
                 moved.push(i as u32);
             }
@@ -1154,7 +1235,7 @@ mod tests {
                 x,
                 cutoff_m,
                 period_x_m,
-                MirrorPlanes::default(),
+                mirror,
                 |i| k[i] != 3,
                 |i| k[i] == 0,
                 |i| k[i] == 1,
@@ -1174,15 +1255,44 @@ mod tests {
                 .collect::<Vec<_>>()
         };
         assert_ne!(holders(&old, n0), holders(&whole, n0));
+        // With planes, moved particles' images entered and left lists.
+        if !mirror.is_empty() {
+            let images_of_moved = |l: &Neighbours| {
+                l.indices
+                    .iter()
+                    .filter(|&&e| {
+                        e >> MIRROR_SHIFT != 0 && moved.contains(&(entry_index(e) as u32))
+                    })
+                    .count()
+            };
+            assert!(images_of_moved(&whole) > 0);
+            assert!(images_of_moved(&old) > 0);
+        }
     }
 
     #[test]
     fn an_update_equals_the_whole_build() {
+        let none = MirrorPlanes::default();
+        // A plane through the points' lowest x (where they may touch it), and one in y beside it.
+        let x = MirrorPlanes {
+            axes: 0b1,
+            position_m: [0.0; 3],
+        };
+        let xy = MirrorPlanes {
+            axes: 0b11,
+            position_m: [0.0, -0.01, 0.0],
+        };
         for seed in 1..4 {
-            check_update_equals_build::<2>(None, seed);
-            check_update_equals_build::<3>(None, seed);
-            check_update_equals_build::<2>(Some(0.6), seed);
-            check_update_equals_build::<3>(Some(0.6), seed);
+            for mirror in [none, x, xy] {
+                check_update_equals_build::<2>(None, mirror, seed);
+                check_update_equals_build::<3>(None, mirror, seed);
+            }
+            check_update_equals_build::<2>(Some(0.6), none, seed);
+            check_update_equals_build::<3>(Some(0.6), none, seed);
+            // A period along x beside a plane normal to y.
+            let y = MirrorPlanes { axes: 0b10, ..xy };
+            check_update_equals_build::<2>(Some(0.6), y, seed);
+            check_update_equals_build::<3>(Some(0.6), y, seed);
         }
     }
 

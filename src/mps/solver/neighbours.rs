@@ -14,8 +14,9 @@ use std::time::Instant;
 /// more than the half skin that forces it puts off the next update (only speed depends on it).
 const REFERENCE_REFRESH: f64 = 0.25;
 
-/// The lists are built whole when more than one particle in this many moved (a partial
-/// update then costs about as much as a build; only speed depends on it).
+/// The lists are built whole when more particles moved than one in this many of those that
+/// hold lists (a partial update, which searches the moved ones, then costs about as much as
+/// a build, which searches the holders; only speed depends on it).
 const MOVED_SHARE_FOR_WHOLE_BUILD: usize = 4;
 
 impl<const D: usize> Solver<D> {
@@ -97,8 +98,8 @@ impl<const D: usize> Solver<D> {
     /// a skin, each particle listed at its own reference position `listed_at_m`). When some
     /// particle has moved half the skin from its reference, or particles were poured, the
     /// particles that moved a share of the skin (and the poured ones) get new references and
-    /// only their entries change ([`Neighbours::updated`]); the lists are built whole when
-    /// many moved, at the start, after a particle left the domain, with mirror planes, and
+    /// only their entries change ([`Neighbours::updated`], mirror images included); the lists
+    /// are built whole when many moved, at the start, after a particle left the domain, and
     /// under wall faces.
     /// Lists are ascending, and every stage cuts them to its radius at the current positions,
     /// so either way gives the same pairs in the same order: the same bits.
@@ -129,7 +130,6 @@ impl<const D: usize> Solver<D> {
             && (listed..n).all(active)
             && !self.fresh_lists
             && !faces_read_lists
-            && self.config.symmetry.is_empty()
         {
             let moved: Vec<u32> = (0..n)
                 .into_par_iter()
@@ -137,7 +137,13 @@ impl<const D: usize> Solver<D> {
                 .filter(|&i| i >= listed || moved_by(i) >= REFERENCE_REFRESH * skin)
                 .map(|i| i as u32)
                 .collect();
-            if moved.len() <= n / MOVED_SHARE_FOR_WHOLE_BUILD {
+            // A build searches the particles that hold lists, an update the moved ones.
+            let holders = (0..listed)
+                .into_par_iter()
+                .with_min_len(PARTICLES_PER_TASK)
+                .filter(|&i| !self.neighbours.of(i).is_empty())
+                .count();
+            if moved.len() <= holders / MOVED_SHARE_FOR_WHOLE_BUILD {
                 self.listed_at_m.resize(n, Vector::<D>::zeros());
                 for &i in &moved {
                     self.listed_at_m[i as usize] = p.position_m[i as usize];
