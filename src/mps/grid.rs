@@ -1,6 +1,7 @@
 //! Cell-list neighbour search in O(N) with a fixed neighbour order.
 use super::particles::Vector;
 use rayon::prelude::*;
+use std::borrow::Cow;
 
 /// Particles per parallel work item when building lists: a constant, so the split (and the
 /// resulting order) never depends on the thread count.
@@ -470,12 +471,15 @@ impl Neighbours {
     /// (plane bits, then index), so that a list's order does not depend on which images
     /// existed when it was built. The second vector names each image as a list entry (its
     /// source's index with its plane bits), ascending.
-    fn with_images<const D: usize>(
-        positions: &[Vector<D>],
+    fn with_images<'a, const D: usize>(
+        positions: &'a [Vector<D>],
         cutoff_m: f64,
         mirror: MirrorPlanes,
         active: &impl Fn(usize) -> bool,
-    ) -> (Vec<Vector<D>>, Vec<u32>) {
+    ) -> (Cow<'a, [Vector<D>]>, Vec<u32>) {
+        if mirror.is_empty() {
+            return (Cow::Borrowed(positions), Vec::new());
+        }
         let mut extended = positions.to_vec();
         let mut images: Vec<u32> = Vec::new();
         for planes in mirror.combinations() {
@@ -492,7 +496,7 @@ impl Neighbours {
             extended.len() <= MAX_PARTICLES,
             "too many particles with mirror images"
         );
-        (extended, images)
+        (Cow::Owned(extended), images)
     }
 
     /// The lists that [`Neighbours::build_centres_then_listed`] gives at `positions` (with
@@ -557,54 +561,48 @@ impl Neighbours {
         // particle enters the others' lists (the cut is symmetric).
         let moved_lists = searched(moved);
         // A moved particle's image enters the lists of the particles within the cutoff of
-        // the image: searched from the image's point, one plane combination at a time.
-        let mut image_rows: Vec<(u32, Neighbours)> = Vec::new();
+        // the image: searched from the image's point, one plane combination at a time
+        // (row k: the k-th image, named by its entry, ascending).
+        let mut image_rows: Vec<(Vec<u32>, Neighbours)> = Vec::new();
         for planes in self.mirror.combinations() {
-            let points: Vec<u32> = moved
+            let (entries, points): (Vec<u32>, Vec<u32>) = moved
                 .iter()
                 .filter_map(|&s| {
-                    images
-                        .binary_search(&(s | planes << MIRROR_SHIFT))
-                        .ok()
-                        .map(|k| (n + k) as u32)
+                    let e = s | planes << MIRROR_SHIFT;
+                    images.binary_search(&e).ok().map(|k| (e, (n + k) as u32))
                 })
-                .collect();
-            image_rows.push((planes, searched(&points)));
+                .unzip();
+            let rows = searched(&points);
+            image_rows.push((entries, rows));
         }
         // The entries of moved particles (and their images) each particle gains, ascending:
         // the plain ones first (moved is ascending), then by plane bits.
         let plain = |e: &u32| *e >> MIRROR_SHIFT == 0;
-        let mut gains: Vec<(u32, u32)> = Vec::new();
-        for (k, &s) in moved.iter().enumerate() {
-            gains.extend(
-                moved_lists
-                    .of(k)
-                    .iter()
-                    .filter(|e| plain(e))
-                    .map(|&i| (i, s)),
-            );
-        }
-        for (planes, rows) in &image_rows {
-            let sources = moved
-                .iter()
-                .filter(|&&s| images.binary_search(&(s | planes << MIRROR_SHIFT)).is_ok());
-            for (k, &s) in sources.enumerate() {
-                let e = s | planes << MIRROR_SHIFT;
-                gains.extend(rows.of(k).iter().filter(|e| plain(e)).map(|&i| (i, e)));
-            }
-        }
         let mut gained_offsets = vec![0usize; n + 1];
-        for &(i, _) in &gains {
-            gained_offsets[i as usize + 1] += 1;
+        let lists = std::iter::once(&moved_lists).chain(image_rows.iter().map(|(_, rows)| rows));
+        for list in lists {
+            for &i in list.indices.iter().filter(|e| plain(e)) {
+                gained_offsets[i as usize + 1] += 1;
+            }
         }
         for i in 0..n {
             gained_offsets[i + 1] += gained_offsets[i];
         }
         let mut fill = gained_offsets.clone();
-        let mut gained = vec![0u32; gains.len()];
-        for &(i, e) in &gains {
-            gained[fill[i as usize]] = e;
-            fill[i as usize] += 1;
+        let mut gained = vec![0u32; gained_offsets[n]];
+        let mut gain = |row: &[u32], e: u32| {
+            for &i in row.iter().filter(|e| plain(e)) {
+                gained[fill[i as usize]] = e;
+                fill[i as usize] += 1;
+            }
+        };
+        for (k, &s) in moved.iter().enumerate() {
+            gain(moved_lists.of(k), s);
+        }
+        for (entries, rows) in &image_rows {
+            for (k, &e) in entries.iter().enumerate() {
+                gain(rows.of(k), e);
+            }
         }
         let gained_of = |i: usize| &gained[gained_offsets[i]..gained_offsets[i + 1]];
         // A particle holds a list for the centres whose own lists hold it, so only a centre's

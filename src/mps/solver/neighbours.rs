@@ -14,10 +14,15 @@ use std::time::Instant;
 /// more than the half skin that forces it puts off the next update (only speed depends on it).
 const REFERENCE_REFRESH: f64 = 0.25;
 
-/// The lists are built whole when more particles moved than one in this many of those that
-/// hold lists (a partial update, which searches the moved ones, then costs about as much as
-/// a build, which searches the holders; only speed depends on it).
+/// The lists are built whole when more than one particle in this many moved (a partial
+/// update then costs about as much as a build; only speed depends on it).
 const MOVED_SHARE_FOR_WHOLE_BUILD: usize = 4;
+
+/// With mirror planes, when more than one in this many of the particles that hold lists
+/// moved: an update there also searches the moved particles' images, and a lifting cone's
+/// walls (moved, most of them near the planes and holding no list) then cost more as an
+/// update than a build, which searches only the holders (measured; only speed depends on it).
+const HOLDERS_SHARE_FOR_WHOLE_BUILD: usize = 2;
 
 impl<const D: usize> Solver<D> {
     /// Neighbour lists of the active particles at the current positions.
@@ -137,13 +142,17 @@ impl<const D: usize> Solver<D> {
                 .filter(|&i| i >= listed || moved_by(i) >= REFERENCE_REFRESH * skin)
                 .map(|i| i as u32)
                 .collect();
-            // A build searches the particles that hold lists, an update the moved ones.
-            let holders = (0..listed)
-                .into_par_iter()
-                .with_min_len(PARTICLES_PER_TASK)
-                .filter(|&i| !self.neighbours.of(i).is_empty())
-                .count();
-            if moved.len() <= holders / MOVED_SHARE_FOR_WHOLE_BUILD {
+            let few = if self.config.symmetry.is_empty() {
+                moved.len() <= n / MOVED_SHARE_FOR_WHOLE_BUILD
+            } else {
+                let holders = (0..listed)
+                    .into_par_iter()
+                    .with_min_len(PARTICLES_PER_TASK)
+                    .filter(|&i| !self.neighbours.of(i).is_empty())
+                    .count();
+                moved.len() <= holders / HOLDERS_SHARE_FOR_WHOLE_BUILD
+            };
+            if few {
                 self.listed_at_m.resize(n, Vector::<D>::zeros());
                 for &i in &moved {
                     self.listed_at_m[i as usize] = p.position_m[i as usize];
