@@ -578,9 +578,16 @@ impl Neighbours {
         // The entries of moved particles (and their images) each particle gains, ascending:
         // the plain ones first (moved is ascending), then by plane bits.
         let plain = |e: &u32| *e >> MIRROR_SHIFT == 0;
+        // (the entries searched from, their lists): row k of a list is searched from entry k.
+        let searches: Vec<(&[u32], &Neighbours)> = std::iter::once((moved, &moved_lists))
+            .chain(
+                image_rows
+                    .iter()
+                    .map(|(entries, rows)| (&entries[..], rows)),
+            )
+            .collect();
         let mut gained_offsets = vec![0usize; n + 1];
-        let lists = std::iter::once(&moved_lists).chain(image_rows.iter().map(|(_, rows)| rows));
-        for list in lists {
+        for (_, list) in &searches {
             for &i in list.indices.iter().filter(|e| plain(e)) {
                 gained_offsets[i as usize + 1] += 1;
             }
@@ -596,11 +603,8 @@ impl Neighbours {
                 fill[i as usize] += 1;
             }
         };
-        for (k, &s) in moved.iter().enumerate() {
-            gain(moved_lists.of(k), s);
-        }
-        for (entries, rows) in &image_rows {
-            for (k, &e) in entries.iter().enumerate() {
+        for (sources, rows) in &searches {
+            for (k, &e) in sources.iter().enumerate() {
                 gain(rows.of(k), e);
             }
         }
