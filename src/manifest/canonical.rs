@@ -8,7 +8,8 @@
 //! (`mps.ppe_preconditioner: jacobi`, `mps.multigrid_over_correction` at 1 or under Jacobi,
 //! `mps.pressure_scheme: standard` with
 //! `mps.compression_relaxation`, `mps.pair_stabilisation`, `mps.wall_support` and
-//! `mps.pressure_regularisation` (with `mps.regularisation_radius`), `mps.surface_depth`,
+//! `mps.pressure_regularisation` and `mps.increment_regularisation` (with
+//! `mps.regularisation_radius`), `mps.surface_depth`,
 //! `mps.pressure_smoothing_time_s` and
 //! `mps.particle_shifting` (with `mps.particle_shifting_limit`) at 0 (and under the standard
 //! scheme), `mps.pressure_floor_pa` at 0, `mps.yield_penalty_pa_s` at 0 (with
@@ -84,6 +85,10 @@ pub fn canonical_text<S: SceneSection>(manifest: &Manifest<S>) -> String {
                 "pressure_regularisation",
                 manifest.mps.pressure_regularisation,
             ),
+            (
+                "increment_regularisation",
+                manifest.mps.increment_regularisation,
+            ),
             ("surface_depth", manifest.mps.surface_depth),
             ("particle_shifting", manifest.mps.particle_shifting),
             (
@@ -107,8 +112,10 @@ pub fn canonical_text<S: SceneSection>(manifest: &Manifest<S>) -> String {
         if manifest.mps.yield_anderson_depth == 0 {
             mps.remove("yield_anderson_depth");
         }
-        // The radius is read only with the regularisation on, the limit only with shifting.
-        if !mps.contains_key("pressure_regularisation") {
+        // The radius is read only with a regularisation on, the limit only with shifting.
+        if !mps.contains_key("pressure_regularisation")
+            && !mps.contains_key("increment_regularisation")
+        {
             mps.remove("regularisation_radius");
         }
         if !mps.contains_key("particle_shifting") {

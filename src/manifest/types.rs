@@ -266,6 +266,14 @@ pub struct Mps {
     /// 1.478, where the shell still resists a shear of its rows (1.5 does not).
     #[serde(default = "default_regularisation_radius")]
     pub regularisation_radius: f64,
+    /// Incremental scheme, dimensionless beta: in the correction each interior fluid particle
+    /// with a positive pressure increment dp_i also feels -(beta dp_i/rho) (d/n0)
+    /// sum_j r_ij w_s(r_ij)/r_ij^2 over the neighbours within `regularisation_radius`: the
+    /// pressure regularisation's repulsion in proportion to the step's increment instead of
+    /// the carried pressure, so it is idle at rest whatever the arrangement and carries no
+    /// friction in proportion to the depth. 0 = off. In [0, 100]. Unused by `standard`.
+    #[serde(default)]
+    pub increment_regularisation: f64,
     /// Incremental scheme, seconds: after each step every interior fluid particle's carried
     /// pressure moves a share dt/T of the way toward the kernel-weighted mean of its fluid
     /// neighbours' pressures carried back to it along their fitted plane, p_j - G_i . r_ij
@@ -479,6 +487,7 @@ impl Default for Mps {
             wall_support: 0.0,
             pressure_regularisation: 0.0,
             regularisation_radius: default_regularisation_radius(),
+            increment_regularisation: 0.0,
             pressure_smoothing_time_s: 0.0,
             surface_depth: 0.0,
             pressure_floor_pa: 0.0,

@@ -223,6 +223,11 @@ pub fn check<S: SceneSection>(m: &Manifest<S>) -> Vec<Issue> {
         p.pressure_regularisation,
         between(0.0, true, 10.0, true),
     );
+    c.real(
+        "mps.increment_regularisation",
+        p.increment_regularisation,
+        between(0.0, true, 100.0, true),
+    );
     let reg_ok = c.real(
         "mps.regularisation_radius",
         p.regularisation_radius,
@@ -264,14 +269,14 @@ pub fn check<S: SceneSection>(m: &Manifest<S>) -> Vec<Issue> {
     // 2D keeps its (1, 2) range, so that files written before still load.
     let limit = first_shell_radius_limit(3);
     if m.dimension == 3
-        && p.pressure_regularisation > 0.0
+        && (p.pressure_regularisation > 0.0 || p.increment_regularisation > 0.0)
         && reg_ok
         && (p.regularisation_radius <= std::f64::consts::SQRT_2 || p.regularisation_radius >= limit)
     {
         c.fail(
             "mps.regularisation_radius",
             format!(
-                "must lie in (sqrt(2), {}) with mps.pressure_regularisation in 3D, where the first shell's rows slide apart outside it (1.45 recommended); got {}",
+                "must lie in (sqrt(2), {}) with mps.pressure_regularisation or mps.increment_regularisation in 3D, where the first shell's rows slide apart outside it (1.45 recommended); got {}",
                 fmt_num((limit * 1e3).floor() / 1e3),
                 fmt_num(p.regularisation_radius)
             ),

@@ -89,6 +89,10 @@ pub struct SolverConfig<const D: usize> {
     /// Zero on a lattice at rest.
     pub pressure_regularisation: f64,
     pub regularisation_radius_m: f64,
+    /// Incremental scheme: beta of the increment's regularisation, the same repulsion with
+    /// the step's positive increment dp_i in place of p_i, in the correction (0 = off). Zero
+    /// at rest on any arrangement.
+    pub increment_regularisation: f64,
     /// Incremental scheme: time constant T (s) of the carried pressure's smoothing toward
     /// the mean of its fluid neighbours' p_j - G_i . r_ij (0 = off; see
     /// `operators::smoothing_sums`). Idle on any linear pressure.

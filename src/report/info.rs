@@ -207,6 +207,7 @@ pub fn run_info(path: &Path, size_bytes: u64, run: &RunFile) -> RunInfo {
                 "pair_stabilisation",
                 "wall_support",
                 "pressure_regularisation",
+                "increment_regularisation",
                 "regularisation_radius",
                 "pressure_smoothing_time_s",
                 "surface_depth",

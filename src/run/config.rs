@@ -98,6 +98,7 @@ pub fn solver_config<const D: usize>(m: &Manifest, scene: &Scene<D>) -> SolverCo
         pressure_regularisation: m.mps.pressure_regularisation,
         pressure_smoothing_time_s: m.mps.pressure_smoothing_time_s,
         regularisation_radius_m: m.mps.regularisation_radius * l0,
+        increment_regularisation: m.mps.increment_regularisation,
         surface_depth_m: m.mps.surface_depth * l0,
         pressure_floor_pa: m.mps.pressure_floor_pa,
         particle_shifting: m.mps.particle_shifting,

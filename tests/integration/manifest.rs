@@ -810,6 +810,47 @@ fn invalid_values_are_named_and_located() {
         ],
     );
     assert_ne!(plain.hash_hex, on.hash_hex);
+    // The increment's regularisation: in [0, 100], the same radius rule in 3D, and off (0)
+    // no part of the experiment, its radius with it.
+    let e = err_with(
+        MINIMAL,
+        &[
+            "mps.pressure_scheme=incremental",
+            "mps.increment_regularisation=101",
+        ],
+    );
+    assert_invalid(&e, "mps.increment_regularisation", None, &["101"]);
+    let e = err_with(
+        MINIMAL,
+        &[
+            "dimension=3",
+            "mps.pressure_scheme=incremental",
+            "mps.increment_regularisation=5",
+        ],
+    );
+    assert_invalid(
+        &e,
+        "mps.regularisation_radius",
+        None,
+        &["(sqrt(2), 1.477)", "3D"],
+    );
+    let off = ok_with(
+        MINIMAL,
+        &[
+            "mps.pressure_scheme=incremental",
+            "mps.increment_regularisation=0",
+            "mps.regularisation_radius=1.7",
+        ],
+    );
+    assert_eq!(plain.hash_hex, off.hash_hex);
+    let on = ok_with(
+        MINIMAL,
+        &[
+            "mps.pressure_scheme=incremental",
+            "mps.increment_regularisation=5",
+        ],
+    );
+    assert_ne!(plain.hash_hex, on.hash_hex);
     // surface_depth, corrected_strain_rate and wall_surface_no_slip likewise.
     let off = ok_with(
         MINIMAL,

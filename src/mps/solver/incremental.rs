@@ -316,6 +316,14 @@ impl<const D: usize> Solver<D> {
             new_pressure
         };
         let scale = -dt_s / rho;
+        // The increment's regularisation at interior fluid particle i (zero when off).
+        let regularised = |i: usize, g: Vector<D>| {
+            if c.increment_regularisation > 0.0 && unknown_of[i] != u32::MAX {
+                g + self.increment_regularisation(i, increment[i])
+            } else {
+                g
+            }
+        };
         let dv: Vec<Vector<D>> = (0..p.len())
             .into_par_iter()
             .with_min_len(PARTICLES_PER_TASK)
@@ -325,12 +333,12 @@ impl<const D: usize> Solver<D> {
                     return Vector::<D>::zeros();
                 }
                 if let Some(gradient) = &gradient {
-                    return gradient[i]
+                    let g = gradient[i]
                         .iter()
                         .fold(Vector::<D>::zeros(), |g, &(k, coef)| {
                             g + coef * increment[k as usize]
-                        })
-                        * scale;
+                        });
+                    return regularised(i, g) * scale;
                 }
                 let di = increment[i];
                 let wall_base = OnceCell::new();
@@ -346,7 +354,7 @@ impl<const D: usize> Solver<D> {
                         ) - di
                     })
                 };
-                corrected_gradient(
+                let g = corrected_gradient(
                     &p.position_m,
                     near,
                     i,
@@ -357,7 +365,8 @@ impl<const D: usize> Solver<D> {
                         _ if support[j] => increment[j] - di,
                         _ => wall_base(),
                     },
-                ) * scale
+                );
+                regularised(i, g) * scale
             })
             .collect();
         self.timing.pressure_assembly_s += pressure_started.elapsed().as_secs_f64() - solve_s;
@@ -432,6 +441,23 @@ impl<const D: usize> Solver<D> {
         let radius = self.config.regularisation_radius_m;
         shell_repulsion(&p.position_m, &self.pairs.near, i, radius)
             * (beta * pi * D as f64 / self.refs.n0)
+    }
+
+    /// The increment's regularisation at fluid particle i (zero for dp_i <= 0): the pressure
+    /// regularisation's pseudo-gradient with the step's increment dp_i in place of p_i,
+    /// beta dp_i (d/n0) sum_j r_ij w_s(r_ij)/r_ij^2 over the neighbours within the
+    /// regularisation radius. A compressing rearrangement raises dp_i, and the repulsion
+    /// pushes i off its closest neighbours while it lasts; at rest dp = 0 on any arrangement,
+    /// so unlike the carried pressure's regularisation it holds no stiffness in proportion
+    /// to the depth, which a thin layer feels as a friction (docs/validation.md, "The
+    /// increment's regularisation").
+    fn increment_regularisation(&self, i: usize, dp_pa: f64) -> Vector<D> {
+        if dp_pa <= 0.0 {
+            return Vector::<D>::zeros();
+        }
+        let radius = self.config.regularisation_radius_m;
+        shell_repulsion(&self.particles.position_m, &self.pairs.near, i, radius)
+            * (self.config.increment_regularisation * dp_pa * D as f64 / self.refs.n0)
     }
 
     /// The pressure each free-surface particle holds (0 elsewhere): rho |g| surface_depth_m
