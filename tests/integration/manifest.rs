@@ -791,27 +791,7 @@ fn invalid_values_are_named_and_located() {
     );
     // Off, the 3D radius is not read.
     ok_with(MINIMAL, &["dimension=3", "mps.pressure_scheme=incremental"]);
-    // Off, it is no part of the experiment: the hash is the one without the fields.
-    let plain = ok_with(MINIMAL, &["mps.pressure_scheme=incremental"]);
-    let off = ok_with(
-        MINIMAL,
-        &[
-            "mps.pressure_scheme=incremental",
-            "mps.pressure_regularisation=0",
-            "mps.regularisation_radius=1.7",
-        ],
-    );
-    assert_eq!(plain.hash_hex, off.hash_hex);
-    let on = ok_with(
-        MINIMAL,
-        &[
-            "mps.pressure_scheme=incremental",
-            "mps.pressure_regularisation=1",
-        ],
-    );
-    assert_ne!(plain.hash_hex, on.hash_hex);
-    // The increment's regularisation: in [0, 100], the same radius rule in 3D, and off (0)
-    // no part of the experiment, its radius with it.
+    // The increment's regularisation: in [0, 100] and under the same radius rule in 3D.
     let e = err_with(
         MINIMAL,
         &[
@@ -834,23 +814,25 @@ fn invalid_values_are_named_and_located() {
         None,
         &["(sqrt(2), 1.477)", "3D"],
     );
-    let off = ok_with(
-        MINIMAL,
-        &[
-            "mps.pressure_scheme=incremental",
-            "mps.increment_regularisation=0",
-            "mps.regularisation_radius=1.7",
-        ],
-    );
-    assert_eq!(plain.hash_hex, off.hash_hex);
-    let on = ok_with(
-        MINIMAL,
-        &[
-            "mps.pressure_scheme=incremental",
-            "mps.increment_regularisation=5",
-        ],
-    );
-    assert_ne!(plain.hash_hex, on.hash_hex);
+    // Off, either is no part of the experiment: the hash is the one without the fields (the
+    // radius with them).
+    let plain = ok_with(MINIMAL, &["mps.pressure_scheme=incremental"]);
+    for field in ["pressure_regularisation", "increment_regularisation"] {
+        let off = ok_with(
+            MINIMAL,
+            &[
+                "mps.pressure_scheme=incremental",
+                &format!("mps.{field}=0"),
+                "mps.regularisation_radius=1.7",
+            ],
+        );
+        assert_eq!(plain.hash_hex, off.hash_hex, "{field}");
+        let on = ok_with(
+            MINIMAL,
+            &["mps.pressure_scheme=incremental", &format!("mps.{field}=1")],
+        );
+        assert_ne!(plain.hash_hex, on.hash_hex, "{field}");
+    }
     // surface_depth, corrected_strain_rate and wall_surface_no_slip likewise.
     let off = ok_with(
         MINIMAL,
