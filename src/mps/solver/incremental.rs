@@ -437,10 +437,15 @@ impl<const D: usize> Solver<D> {
         if pi <= 0.0 {
             return Vector::<D>::zeros();
         }
-        let p = &self.particles;
+        self.shell_pseudo_gradient(i, beta * pi)
+    }
+
+    /// beta x (d/n0) sum_j r_ij w_s(r_ij)/r_ij^2 over i's neighbours within the
+    /// regularisation radius, for `scaled` = beta x: both regularisations' force.
+    fn shell_pseudo_gradient(&self, i: usize, scaled: f64) -> Vector<D> {
         let radius = self.config.regularisation_radius_m;
-        shell_repulsion(&p.position_m, &self.pairs.near, i, radius)
-            * (beta * pi * D as f64 / self.refs.n0)
+        shell_repulsion(&self.particles.position_m, &self.pairs.near, i, radius)
+            * (scaled * D as f64 / self.refs.n0)
     }
 
     /// The increment's regularisation at fluid particle i (zero for dp_i <= 0): the pressure
@@ -455,9 +460,7 @@ impl<const D: usize> Solver<D> {
         if dp_pa <= 0.0 {
             return Vector::<D>::zeros();
         }
-        let radius = self.config.regularisation_radius_m;
-        shell_repulsion(&self.particles.position_m, &self.pairs.near, i, radius)
-            * (self.config.increment_regularisation * dp_pa * D as f64 / self.refs.n0)
+        self.shell_pseudo_gradient(i, self.config.increment_regularisation * dp_pa)
     }
 
     /// The pressure each free-surface particle holds (0 elsewhere): rho |g| surface_depth_m
