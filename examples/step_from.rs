@@ -21,6 +21,11 @@
 //! the whole fluid (docs/validation.md, "A disordered layer on an incline").
 //! `--watch I` prints particle I after every step: its position, velocity and pressure, and
 //! its nearest neighbour (distance in spacings, kind): how a single particle blows up.
+//! `--where` prints, at the end, where the fluid moves and where its number density sits
+//! below the surface threshold (bands of distance to the walls, of height; [`locate`]): how
+//! the rock bed's residual stir was traced to the free surface flagged inside the concrete
+//! (docs/validation.md, "The rock bed's residual stir"). Each row also gives the fluid's
+//! centre-of-mass height (`com_z`).
 use mps_runner::experiment::{SceneSpec, experiment_metrics};
 use mps_runner::manifest;
 use mps_runner::mps::{ParticleKind, STAGE_NAMES, Solver, StageMomentum};
@@ -39,6 +44,8 @@ struct Plan {
     area_m2: f64,
     /// `--watch`: the particle traced after every step.
     watch: Option<usize>,
+    /// `--where`: the breakdown of the fluid's motion at the end.
+    locate: bool,
 }
 
 fn main() {
@@ -52,6 +59,7 @@ fn main() {
         band_m: None,
         area_m2: 1.0,
         watch: None,
+        locate: false,
     };
     let mut sets = Vec::new();
     let mut i = 0;
@@ -69,6 +77,7 @@ fn main() {
             "--stage-momentum" => (plan.band_m, i) = (Some(value(i)), i + 1),
             "--area" => (plan.area_m2, i) = (value(i), i + 1),
             "--watch" => (plan.watch, i) = (Some(value(i) as usize), i + 1),
+            "--where" => plan.locate = true,
             "--metric" => {
                 plan.metric = Some(args.get(i + 1).expect("--metric needs a name").clone());
                 i += 1;
@@ -169,6 +178,12 @@ fn step_on<const D: usize>(
                 .filter(|&i| solver.particles.kind[i] == ParticleKind::Fluid)
                 .collect();
             let rigid = fluid.iter().filter(|&&i| !solver.is_flowing(i)).count();
+            // The fluid's centre of mass height: a settling or swelling mass.
+            let com_m = fluid
+                .iter()
+                .map(|&i| solver.particles.position_m[i][D - 1])
+                .sum::<f64>()
+                / fluid.len().max(1) as f64;
             let shown = metric.map_or(String::new(), |name| {
                 let metrics = experiment_metrics(m, &solver.particles, solver.time_s);
                 match metrics.get(name) {
@@ -177,7 +192,7 @@ fn step_on<const D: usize>(
                 }
             });
             println!(
-                "{:.3}  {:.3e}  {:.3e}  {:.3e}  {:.3}  {}{}",
+                "{:.3}  {:.3e}  {:.3e}  {:.3e}  {:.3}  {}  com_z {com_m:.6}{}",
                 solver.time_s,
                 sum / count as f64,
                 max_ke,
@@ -192,6 +207,9 @@ fn step_on<const D: usize>(
     }
     if let Some(sums) = &solver.stage_momentum {
         print_stage_momentum(sums, m, plan.area_m2);
+    }
+    if plan.locate {
+        locate(&solver, m.spacing_m);
     }
     print_cost(&solver.timing, solver.step - first_step);
     // With nothing changed, a recorded checkpoint at the same step must be reproduced bit for
@@ -299,4 +317,163 @@ fn print_stage_momentum(sums: &StageMomentum, m: &mps_runner::experiment::Manife
         .map(|(n, a)| format!("{n} {a:.3}"))
         .collect();
     println!("# on the whole fluid, Pa: {}", whole.join(", "));
+}
+
+/// One fluid particle as `--where` sees it.
+struct Spot {
+    index: usize,
+    /// Distance to the nearest wall or dummy particle, in spacings (4 when none is nearer).
+    wall_l0: f64,
+    /// n/n0 with the number density's radius, at the current positions.
+    density: f64,
+    /// |sum_j w_ij r_ij| / sum_j w_ij in spacings: how lopsided the neighbours are (about
+    /// 0.4 on a flat free surface, under 0.1 inside).
+    deviation_l0: f64,
+    speed_m_s: f64,
+    flowing: bool,
+}
+
+/// Where the fluid moves (`--where`), at the current positions: per band of distance to the
+/// nearest wall or dummy particle, the particles, their mean and largest speed, flowing
+/// share, mean n/n0 and how many are below the surface threshold (and of those, how many lie
+/// deeper than three spacings under the highest fluid particle: the free surface flagged
+/// inside the fluid); the centroid deviation of those below the threshold; the mean velocity
+/// over all the fluid and in height bands (a settling or swelling mass against a noise that
+/// averages out); the ten fastest particles. Neighbours through a periodic boundary or a
+/// mirror plane are not counted: there the densities read low.
+fn locate<const D: usize>(solver: &Solver<D>, spacing_m: f64) {
+    let p = &solver.particles;
+    let (re, n0) = (solver.refs.radius_n_m, solver.refs.n0);
+    let reach = 4.0 * spacing_m;
+    let cell = |x: &mps_runner::mps::Vector<D>| -> [i64; D] {
+        std::array::from_fn(|k| (x[k] / reach).floor() as i64)
+    };
+    let mut cells: std::collections::HashMap<[i64; D], Vec<usize>> = Default::default();
+    for i in (0..p.len()).filter(|&i| p.kind[i] != ParticleKind::Ghost) {
+        cells.entry(cell(&p.position_m[i])).or_default().push(i);
+    }
+    let mut spots = Vec::new();
+    for i in (0..p.len()).filter(|&i| p.kind[i] == ParticleKind::Fluid) {
+        let c = cell(&p.position_m[i]);
+        let (mut wall_l0, mut n) = (4.0f64, 0.0);
+        let mut centroid = mps_runner::mps::Vector::<D>::zeros();
+        for offset in 0..3usize.pow(D as u32) {
+            let mut key = c;
+            let mut o = offset;
+            for k in key.iter_mut() {
+                *k += (o % 3) as i64 - 1;
+                o /= 3;
+            }
+            for &j in cells.get(&key).map_or(&[][..], |v| &v[..]) {
+                let r = p.position_m[j] - p.position_m[i];
+                if j == i {
+                    continue;
+                }
+                if p.kind[j] != ParticleKind::Fluid {
+                    wall_l0 = wall_l0.min(r.norm() / spacing_m);
+                }
+                let w = mps_runner::mps::kernel::weight(r.norm(), re);
+                n += w;
+                centroid += r * w;
+            }
+        }
+        spots.push(Spot {
+            index: i,
+            wall_l0,
+            density: n / n0,
+            deviation_l0: if n > 0.0 {
+                centroid.norm() / n / spacing_m
+            } else {
+                f64::INFINITY
+            },
+            speed_m_s: p.velocity_m_s[i].norm(),
+            flowing: solver.is_flowing(i),
+        });
+    }
+    let threshold = solver.config.surface_threshold;
+    let top_m = spots
+        .iter()
+        .map(|s| p.position_m[s.index][D - 1])
+        .fold(f64::MIN, f64::max);
+    let deep = |s: &Spot| p.position_m[s.index][D - 1] < top_m - 3.0 * spacing_m;
+    println!(
+        "# wall distance (l0): particles  mean_speed_m_s  max_speed_m_s  flowing  mean_n/n0  \
+         below_{threshold}  of_them_deep"
+    );
+    for band in 0..5 {
+        let sel: Vec<&Spot> = spots
+            .iter()
+            .filter(|s| (s.wall_l0.floor() as usize).min(4) == band)
+            .collect();
+        if sel.is_empty() {
+            continue;
+        }
+        let count = sel.len() as f64;
+        let mean = sel.iter().map(|s| s.speed_m_s).sum::<f64>() / count;
+        let max = sel.iter().map(|s| s.speed_m_s).fold(0.0, f64::max);
+        let flowing = sel.iter().filter(|s| s.flowing).count() as f64 / count;
+        let density = sel.iter().map(|s| s.density).sum::<f64>() / count;
+        let below: Vec<&&Spot> = sel.iter().filter(|s| s.density < threshold).collect();
+        let below_deep = below.iter().filter(|s| deep(s)).count();
+        println!(
+            "#   {:<8} {:>7} {mean:.3e} {max:.3e} {flowing:.3} {density:.4} {} {below_deep}",
+            if band < 4 {
+                format!("[{band},{})", band + 1)
+            } else {
+                ">=4".into()
+            },
+            sel.len(),
+            below.len()
+        );
+    }
+    let mut histogram = [0usize; 8];
+    for s in spots.iter().filter(|s| s.density < threshold) {
+        histogram[((s.deviation_l0 / 0.05) as usize).min(7)] += 1;
+    }
+    println!(
+        "# centroid deviation below the threshold, bins of 0.05 l0 (last: 0.35 up): {histogram:?}"
+    );
+    let mean_velocity = |sel: &[&Spot]| {
+        sel.iter()
+            .map(|s| p.velocity_m_s[s.index])
+            .fold(mps_runner::mps::Vector::<D>::zeros(), |a, v| a + v)
+            / sel.len().max(1) as f64
+    };
+    let all: Vec<&Spot> = spots.iter().collect();
+    println!(
+        "# mean velocity of the fluid {:?} m/s",
+        mean_velocity(&all).as_slice()
+    );
+    let band_m = 2.0 * spacing_m;
+    let height_band = |s: &Spot| (p.position_m[s.index][D - 1] / band_m).floor() as i64;
+    let (low, high) = spots.iter().fold((i64::MAX, i64::MIN), |(l, h), s| {
+        (l.min(height_band(s)), h.max(height_band(s)))
+    });
+    for b in low..=high {
+        let sel: Vec<&Spot> = spots.iter().filter(|s| height_band(s) == b).collect();
+        if !sel.is_empty() {
+            let rms =
+                (sel.iter().map(|s| s.speed_m_s.powi(2)).sum::<f64>() / sel.len() as f64).sqrt();
+            println!(
+                "#   height {:.3} m: {} particles, mean velocity {:?}, rms speed {rms:.3e}",
+                b as f64 * band_m,
+                sel.len(),
+                mean_velocity(&sel).as_slice()
+            );
+        }
+    }
+    spots.sort_by(|a, b| b.speed_m_s.total_cmp(&a.speed_m_s));
+    println!("# fastest: index  x_m  speed_m_s  wall_l0  n/n0  deviation_l0  flowing");
+    for s in spots.iter().take(10) {
+        println!(
+            "#   {} {:?} {:.3e} {:.2} {:.3} {:.3} {}",
+            s.index,
+            p.position_m[s.index].as_slice(),
+            s.speed_m_s,
+            s.wall_l0,
+            s.density,
+            s.deviation_l0,
+            s.flowing
+        );
+    }
 }
