@@ -9,7 +9,8 @@
 //! `mps.pressure_scheme: standard` with
 //! `mps.compression_relaxation`, `mps.pair_stabilisation`, `mps.wall_support` and
 //! `mps.pressure_regularisation` and `mps.increment_regularisation` (with
-//! `mps.regularisation_radius`), `mps.surface_depth`,
+//! `mps.regularisation_radius`), `mps.deep_surface_threshold` (with `mps.deep_surface_head`),
+//! `mps.surface_depth`,
 //! `mps.pressure_smoothing_time_s` and
 //! `mps.particle_shifting` (with `mps.particle_shifting_limit`) at 0 (and under the standard
 //! scheme), `mps.pressure_floor_pa` at 0, `mps.yield_penalty_pa_s` at 0 (with
@@ -89,6 +90,10 @@ pub fn canonical_text<S: SceneSection>(manifest: &Manifest<S>) -> String {
                 "increment_regularisation",
                 manifest.mps.increment_regularisation,
             ),
+            (
+                "deep_surface_threshold",
+                manifest.mps.deep_surface_threshold,
+            ),
             ("surface_depth", manifest.mps.surface_depth),
             ("particle_shifting", manifest.mps.particle_shifting),
             (
@@ -120,6 +125,9 @@ pub fn canonical_text<S: SceneSection>(manifest: &Manifest<S>) -> String {
         }
         if !mps.contains_key("particle_shifting") {
             mps.remove("particle_shifting_limit");
+        }
+        if !mps.contains_key("deep_surface_threshold") {
+            mps.remove("deep_surface_head");
         }
         // The regularised law (penalty 0) is the behaviour before the yield solve existed.
         if manifest.mps.yield_penalty_pa_s == 0.0 {

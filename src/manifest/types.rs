@@ -274,6 +274,21 @@ pub struct Mps {
     /// friction in proportion to the depth. 0 = off. In [0, 100]. Unused by `standard`.
     #[serde(default)]
     pub increment_regularisation: f64,
+    /// Incremental scheme: a fluid particle below `surface_threshold` whose carried pressure
+    /// exceeds that of `deep_surface_head` spacings of fluid (rho g h l0) is on the free
+    /// surface only if its number density is also below this share of n0. Deep in the
+    /// material a free surface is a cavity's wall, far below the threshold; a particle that
+    /// only dips under it (beside a rock's stepped surface, in the loose packing a pour
+    /// leaves) keeps its row instead of flickering to the surface's pressure, a drop of
+    /// several kPa that jolts its neighbours (docs/validation.md, "The rock bed's residual
+    /// stir"). 0 = off (the threshold alone, at any depth). In [0, `surface_threshold`).
+    /// Unused by `standard`.
+    #[serde(default)]
+    pub deep_surface_threshold: f64,
+    /// Incremental scheme, spacings: the depth, as carried pressure over rho g l0, below
+    /// which `deep_surface_threshold` applies. In (0, 1000]. Read only with it on.
+    #[serde(default = "default_deep_surface_head")]
+    pub deep_surface_head: f64,
     /// Incremental scheme, seconds: after each step every interior fluid particle's carried
     /// pressure moves a share dt/T of the way toward the kernel-weighted mean of its fluid
     /// neighbours' pressures carried back to it along their fitted plane, p_j - G_i . r_ij
@@ -488,6 +503,8 @@ impl Default for Mps {
             pressure_regularisation: 0.0,
             regularisation_radius: default_regularisation_radius(),
             increment_regularisation: 0.0,
+            deep_surface_threshold: 0.0,
+            deep_surface_head: default_deep_surface_head(),
             pressure_smoothing_time_s: 0.0,
             surface_depth: 0.0,
             pressure_floor_pa: 0.0,
@@ -565,6 +582,10 @@ impl PressureSchemeName {
             Self::Incremental => "incremental",
         }
     }
+}
+
+fn default_deep_surface_head() -> f64 {
+    3.0
 }
 
 fn default_regularisation_radius() -> f64 {

@@ -228,6 +228,26 @@ pub fn check<S: SceneSection>(m: &Manifest<S>) -> Vec<Issue> {
         p.increment_regularisation,
         between(0.0, true, 100.0, true),
     );
+    if c.real(
+        "mps.deep_surface_threshold",
+        p.deep_surface_threshold,
+        between(0.0, true, 1.0, false),
+    ) && p.deep_surface_threshold >= p.surface_threshold
+    {
+        c.fail(
+            "mps.deep_surface_threshold",
+            format!(
+                "must lie below mps.surface_threshold ({}), the rule it narrows at depth; got {}",
+                fmt_num(p.surface_threshold),
+                fmt_num(p.deep_surface_threshold)
+            ),
+        );
+    }
+    c.real(
+        "mps.deep_surface_head",
+        p.deep_surface_head,
+        between(0.0, false, 1000.0, true),
+    );
     let reg_ok = c.real(
         "mps.regularisation_radius",
         p.regularisation_radius,

@@ -93,6 +93,11 @@ pub struct SolverConfig<const D: usize> {
     /// the step's positive increment dp_i in place of p_i, in the correction (0 = off). Zero
     /// at rest on any arrangement.
     pub increment_regularisation: f64,
+    /// Incremental scheme: below the surface threshold, a fluid particle whose carried
+    /// pressure exceeds `deep_surface_pressure_pa` is on the free surface only if n* is
+    /// also below this share of n0 (0 = the threshold alone).
+    pub deep_surface_threshold: f64,
+    pub deep_surface_pressure_pa: f64,
     /// Incremental scheme: time constant T (s) of the carried pressure's smoothing toward
     /// the mean of its fluid neighbours' p_j - G_i . r_ij (0 = off; see
     /// `operators::smoothing_sums`). Idle on any linear pressure.

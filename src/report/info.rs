@@ -208,6 +208,8 @@ pub fn run_info(path: &Path, size_bytes: u64, run: &RunFile) -> RunInfo {
                 "wall_support",
                 "pressure_regularisation",
                 "increment_regularisation",
+                "deep_surface_threshold",
+                "deep_surface_head",
                 "regularisation_radius",
                 "pressure_smoothing_time_s",
                 "surface_depth",

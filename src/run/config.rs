@@ -99,6 +99,11 @@ pub fn solver_config<const D: usize>(m: &Manifest, scene: &Scene<D>) -> SolverCo
         pressure_smoothing_time_s: m.mps.pressure_smoothing_time_s,
         regularisation_radius_m: m.mps.regularisation_radius * l0,
         increment_regularisation: m.mps.increment_regularisation,
+        deep_surface_threshold: m.mps.deep_surface_threshold,
+        deep_surface_pressure_pa: m.fluid.density_kg_m3()
+            * m.gravity_m_s2
+            * m.mps.deep_surface_head
+            * l0,
         surface_depth_m: m.mps.surface_depth * l0,
         pressure_floor_pa: m.mps.pressure_floor_pa,
         particle_shifting: m.mps.particle_shifting,

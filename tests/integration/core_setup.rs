@@ -68,6 +68,8 @@ pub fn config<const D: usize>(
         pressure_smoothing_time_s: 0.0,
         regularisation_radius_m: 1.5 * l0,
         increment_regularisation: 0.0,
+        deep_surface_threshold: 0.0,
+        deep_surface_pressure_pa: 0.0,
         surface_depth_m: 0.0,
         pressure_floor_pa: 0.0,
         particle_shifting: 0.0,

@@ -1114,3 +1114,47 @@ fn an_acoustic_step_bound_keeps_a_fine_2d_start_smooth() {
         "without the bound the start jumps (2.1 m/s at the fifth step when measured): {speeds:?}"
     );
 }
+
+/// The free surface at depth (`mps.deep_surface_threshold`): a 3D tank under hydrostatic
+/// pressure with two single vacancies, one 5 spacings deep, one 1 spacing under the top row.
+/// A vacancy leaves its 6 face neighbours at 0.92 n0 and its 12 edge neighbours at 0.966 n0,
+/// below the threshold 0.97, so the threshold alone flags them all as free surface (18 at the
+/// deep one, 13 at the shallow one outside the top row), each at the surface's pressure: in
+/// the rock bed that flicker jolts the deep concrete (docs/validation.md, "The rock bed's
+/// residual stir"). With the deep rule at 0.9 below 3 spacings of head, the deep vacancy's
+/// neighbours keep their rows, and the shallow one's stay on the surface.
+#[test]
+fn a_deep_vacancy_is_no_free_surface_under_the_deep_threshold() {
+    let surface_count = |deep_threshold: f64, head_l0: f64| {
+        let l0 = 0.02;
+        let rho_g = 1000.0 * 9.81;
+        let (mut particles, lo, hi) = walled_box::<3>(l0, [8, 8, 12], 10);
+        // Row k holds rho g (9.5 - k) l0: the surface half a spacing above the top row (9).
+        for i in 0..particles.len() {
+            if particles.kind[i] == ParticleKind::Fluid {
+                particles.pressure_pa[i] = rho_g * (10.0 * l0 - particles.position_m[i][2]);
+            }
+        }
+        for row in [4.5, 8.5] {
+            let hole = Vector::<3>::new(4.5 * l0, 4.5 * l0, row * l0);
+            let vacancy = (0..particles.len())
+                .find(|&i| (particles.position_m[i] - hole).norm() < 1e-9)
+                .expect("a fluid particle at the hole");
+            // Out of the fluid and out of reach: a ghost is nobody's neighbour.
+            particles.kind[vacancy] = ParticleKind::Ghost;
+        }
+        let mut cfg = config::<3>(l0, lo, hi);
+        cfg.pressure_scheme = PressureScheme::Incremental;
+        cfg.deep_surface_threshold = deep_threshold;
+        cfg.deep_surface_pressure_pa = rho_g * head_l0 * l0;
+        let mut solver = Solver::new(cfg, particles);
+        solver.step(1e-4).expect("step").surface_count
+    };
+    // The top row of 8 x 8, the deep vacancy's 18 and the shallow one's 13 neighbours.
+    assert_eq!(surface_count(0.0, 3.0), 64 + 18 + 13);
+    assert_eq!(surface_count(0.9, 3.0), 64 + 13);
+    // Above the face neighbours' 0.92 they are on the surface again.
+    assert_eq!(surface_count(0.93, 3.0), 64 + 6 + 13);
+    // A head deeper than the tank: the threshold alone everywhere.
+    assert_eq!(surface_count(0.9, 10.0), 64 + 18 + 13);
+}

@@ -145,8 +145,18 @@ impl<const D: usize> Solver<D> {
         // (measured: with walls as unknowns, as in the standard scheme, the tank at rest
         // diverges within 3 s at dt/2).
         let threshold = c.surface_threshold * refs.n0;
+        // Deeper than `deep_surface_pressure_pa` (by the carried pressure) only a clearly
+        // loose particle is on the surface: one that just dips under the threshold there
+        // would flicker to the surface's pressure and back (`mps.deep_surface_threshold`).
+        let deep_threshold = c.deep_surface_threshold * refs.n0;
         let surface: Vec<bool> = (0..p.len())
-            .map(|i| is_fluid(i) && number_density[i] < threshold)
+            .map(|i| {
+                is_fluid(i)
+                    && number_density[i] < threshold
+                    && (deep_threshold == 0.0
+                        || p.pressure_pa[i] <= c.deep_surface_pressure_pa
+                        || number_density[i] < deep_threshold)
+            })
             .collect();
         let surface_count = surface.iter().filter(|&&s| s).count();
         let surface_value = self.surface_pressure(&surface);
