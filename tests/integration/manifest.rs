@@ -835,13 +835,10 @@ fn invalid_values_are_named_and_located() {
     }
     // The deep surface rule: below the surface threshold, its head positive, and off (0) no
     // part of the experiment, its head with it.
-    let e = err_with(
-        MINIMAL,
-        &[
-            "mps.pressure_scheme=incremental",
-            "mps.deep_surface_threshold=0.97",
-        ],
-    );
+    fn incremental<'a>(sets: &[&'a str]) -> Vec<&'a str> {
+        [&["mps.pressure_scheme=incremental"], sets].concat()
+    }
+    let e = err_with(MINIMAL, &incremental(&["mps.deep_surface_threshold=0.97"]));
     assert_invalid(
         &e,
         "mps.deep_surface_threshold",
@@ -850,39 +847,18 @@ fn invalid_values_are_named_and_located() {
     );
     let e = err_with(
         MINIMAL,
-        &[
-            "mps.pressure_scheme=incremental",
-            "mps.deep_surface_threshold=0.9",
-            "mps.deep_surface_head=0",
-        ],
+        &incremental(&["mps.deep_surface_threshold=0.9", "mps.deep_surface_head=0"]),
     );
     assert_invalid(&e, "mps.deep_surface_head", None, &["0"]);
-    let off = ok_with(
-        MINIMAL,
-        &[
-            "mps.pressure_scheme=incremental",
-            "mps.deep_surface_threshold=0",
-            "mps.deep_surface_head=5",
-        ],
+    let hash = |sets: &[&str]| ok_with(MINIMAL, &incremental(sets)).hash_hex;
+    let off = hash(&["mps.deep_surface_threshold=0", "mps.deep_surface_head=5"]);
+    assert_eq!(plain.hash_hex, off);
+    let on = hash(&["mps.deep_surface_threshold=0.9"]);
+    assert_ne!(plain.hash_hex, on);
+    assert_ne!(
+        on,
+        hash(&["mps.deep_surface_threshold=0.9", "mps.deep_surface_head=5"])
     );
-    assert_eq!(plain.hash_hex, off.hash_hex);
-    let on = ok_with(
-        MINIMAL,
-        &[
-            "mps.pressure_scheme=incremental",
-            "mps.deep_surface_threshold=0.9",
-        ],
-    );
-    assert_ne!(plain.hash_hex, on.hash_hex);
-    let deeper = ok_with(
-        MINIMAL,
-        &[
-            "mps.pressure_scheme=incremental",
-            "mps.deep_surface_threshold=0.9",
-            "mps.deep_surface_head=5",
-        ],
-    );
-    assert_ne!(on.hash_hex, deeper.hash_hex);
     // surface_depth, corrected_strain_rate and wall_surface_no_slip likewise.
     let off = ok_with(
         MINIMAL,
