@@ -1116,7 +1116,7 @@ fn an_acoustic_step_bound_keeps_a_fine_2d_start_smooth() {
 }
 
 /// The free surface at depth (`mps.deep_surface_threshold`): a 3D tank under hydrostatic
-/// pressure with two single vacancies, one 5 spacings deep, one 1 spacing under the top row.
+/// pressure with two single vacancies, 5.5 spacings under its surface and one under the top row.
 /// A vacancy leaves its 6 face neighbours at 0.92 n0 and its 12 edge neighbours at 0.966 n0,
 /// below the threshold 0.97, so the threshold alone flags them all as free surface (18 at the
 /// deep one, 13 at the shallow one outside the top row), each at the surface's pressure: in
