@@ -28,6 +28,9 @@
 //! centre-of-mass height (`com_z`).
 use mps_runner::experiment::{SceneSpec, experiment_metrics};
 use mps_runner::manifest;
+use mps_runner::mps::grid::{Neighbours, entry_index};
+use mps_runner::mps::kernel::weight;
+use mps_runner::mps::operators::number_density;
 use mps_runner::mps::{ParticleKind, STAGE_NAMES, Solver, StageMomentum};
 use mps_runner::proto::mps::v1::StateCheckpoint;
 use mps_runner::record::read_run;
@@ -344,52 +347,41 @@ struct Spot {
 fn locate<const D: usize>(solver: &Solver<D>, spacing_m: f64) {
     let p = &solver.particles;
     let (re, n0) = (solver.refs.radius_n_m, solver.refs.n0);
-    let reach = 4.0 * spacing_m;
-    let cell = |x: &mps_runner::mps::Vector<D>| -> [i64; D] {
-        std::array::from_fn(|k| (x[k] / reach).floor() as i64)
-    };
-    let mut cells: std::collections::HashMap<[i64; D], Vec<usize>> = Default::default();
-    for i in (0..p.len()).filter(|&i| p.kind[i] != ParticleKind::Ghost) {
-        cells.entry(cell(&p.position_m[i])).or_default().push(i);
-    }
-    let mut spots = Vec::new();
-    for i in (0..p.len()).filter(|&i| p.kind[i] == ParticleKind::Fluid) {
-        let c = cell(&p.position_m[i]);
-        let (mut wall_l0, mut n) = (4.0f64, 0.0);
-        let mut centroid = mps_runner::mps::Vector::<D>::zeros();
-        for offset in 0..3usize.pow(D as u32) {
-            let mut key = c;
-            let mut o = offset;
-            for k in key.iter_mut() {
-                *k += (o % 3) as i64 - 1;
-                o /= 3;
-            }
-            for &j in cells.get(&key).map_or(&[][..], |v| &v[..]) {
-                let r = p.position_m[j] - p.position_m[i];
-                if j == i {
-                    continue;
-                }
-                if p.kind[j] != ParticleKind::Fluid {
+    let fluid = |i: usize| p.kind[i] == ParticleKind::Fluid;
+    // Four spacings: the wall distance is reported up to there, and the number density's
+    // radius lies inside.
+    let nb = Neighbours::build_centres(
+        &p.position_m,
+        4.0 * spacing_m,
+        |i| p.kind[i] != ParticleKind::Ghost,
+        fluid,
+    );
+    let mut spots: Vec<Spot> = (0..p.len())
+        .filter(|&i| fluid(i))
+        .map(|i| {
+            let (mut wall_l0, mut centroid) = (4.0f64, mps_runner::mps::Vector::<D>::zeros());
+            for &e in nb.of(i) {
+                let r = nb.displacement(&p.position_m, i, e);
+                if !fluid(entry_index(e)) {
                     wall_l0 = wall_l0.min(r.norm() / spacing_m);
                 }
-                let w = mps_runner::mps::kernel::weight(r.norm(), re);
-                n += w;
-                centroid += r * w;
+                centroid += r * weight(r.norm(), re);
             }
-        }
-        spots.push(Spot {
-            index: i,
-            wall_l0,
-            density: n / n0,
-            deviation_l0: if n > 0.0 {
-                centroid.norm() / n / spacing_m
-            } else {
-                f64::INFINITY
-            },
-            speed_m_s: p.velocity_m_s[i].norm(),
-            flowing: solver.is_flowing(i),
-        });
-    }
+            let n = number_density(&p.position_m, &nb, i, re, |_| true);
+            Spot {
+                index: i,
+                wall_l0,
+                density: n / n0,
+                deviation_l0: if n > 0.0 {
+                    centroid.norm() / n / spacing_m
+                } else {
+                    f64::INFINITY
+                },
+                speed_m_s: p.velocity_m_s[i].norm(),
+                flowing: solver.is_flowing(i),
+            }
+        })
+        .collect();
     let threshold = solver.config.surface_threshold;
     let top_m = spots
         .iter()
