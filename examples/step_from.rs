@@ -194,8 +194,9 @@ fn step_on<const D: usize>(
                     None => panic!("no metric {name:?}; the test has {:?}", metrics.keys()),
                 }
             });
+            let excess = pressure_excess(&solver, &fluid, m);
             println!(
-                "{:.3}  {:.3e}  {:.3e}  {:.3e}  {:.3}  {}  com_z {com_m:.6}{}",
+                "{:.3}  {:.3e}  {:.3e}  {:.3e}  {:.3}  {}  com_z {com_m:.6}{}{excess}",
                 solver.time_s,
                 sum / count as f64,
                 max_ke,
@@ -228,6 +229,36 @@ fn step_on<const D: usize>(
             if same { "identical" } else { "differs" }
         );
     }
+}
+
+/// The carried pressure against the hydrostatic one under the fluid's highest particle,
+/// p - rho g (z_top - z): its mean, and its 1st and 99th percentiles, in Pa. A pressure
+/// that the material holds against its yield stress, and how it builds up.
+fn pressure_excess<const D: usize>(
+    solver: &Solver<D>,
+    fluid: &[usize],
+    m: &mps_runner::experiment::Manifest,
+) -> String {
+    let p = &solver.particles;
+    if fluid.is_empty() {
+        return String::new();
+    }
+    let top = fluid
+        .iter()
+        .fold(f64::MIN, |t, &i| t.max(p.position_m[i][D - 1]));
+    let rho_g = m.fluid.density_kg_m3() * m.gravity_m_s2;
+    let mut excess: Vec<f64> = fluid
+        .iter()
+        .map(|&i| p.pressure_pa[i] - rho_g * (top - p.position_m[i][D - 1]))
+        .collect();
+    let mean = excess.iter().sum::<f64>() / excess.len() as f64;
+    excess.sort_by(f64::total_cmp);
+    let at = |q: f64| excess[((excess.len() - 1) as f64 * q).round() as usize];
+    format!(
+        "  p_excess mean {mean:.1} p1 {:.1} p99 {:.1} Pa",
+        at(0.01),
+        at(0.99)
+    )
 }
 
 /// What the steps cost, stage by stage (wall seconds, CG iterations a step; the rows of
