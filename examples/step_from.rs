@@ -25,7 +25,9 @@
 //! below the surface threshold (bands of distance to the walls, of height; [`locate`]): how
 //! the rock bed's residual stir was traced to the free surface flagged inside the concrete
 //! (docs/validation.md, "The rock bed's residual stir"). Each row also gives the fluid's
-//! centre-of-mass height (`com_z`).
+//! centre-of-mass height (`com_z`) and its carried pressure's excess over the hydrostatic
+//! one under the highest fluid particle (`p_excess`: mean, 1st and 99th percentiles; under a
+//! flat top only).
 use mps_runner::experiment::{SceneSpec, experiment_metrics};
 use mps_runner::manifest;
 use mps_runner::mps::grid::{Neighbours, entry_index};
@@ -233,7 +235,9 @@ fn step_on<const D: usize>(
 
 /// The carried pressure against the hydrostatic one under the fluid's highest particle,
 /// p - rho g (z_top - z): its mean, and its 1st and 99th percentiles, in Pa. A pressure
-/// that the material holds against its yield stress, and how it builds up.
+/// that the material holds against its yield stress, and how it builds up. It means
+/// something only under a flat top (a layer, a tank, a filled bed); under a heap or a
+/// slump it measures from the heap's summit.
 fn pressure_excess<const D: usize>(
     solver: &Solver<D>,
     fluid: &[usize],
