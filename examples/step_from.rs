@@ -247,9 +247,7 @@ fn pressure_excess<const D: usize>(
     if fluid.is_empty() {
         return String::new();
     }
-    let top = fluid
-        .iter()
-        .fold(f64::MIN, |t, &i| t.max(p.position_m[i][D - 1]));
+    let top = highest(&p.position_m, fluid.iter().copied());
     let rho_g = m.fluid.density_kg_m3() * m.gravity_m_s2;
     let mut excess: Vec<f64> = fluid
         .iter()
@@ -263,6 +261,14 @@ fn pressure_excess<const D: usize>(
         at(0.01),
         at(0.99)
     )
+}
+
+/// The height (last coordinate) of the highest of the particles `indices`.
+fn highest<const D: usize>(
+    position_m: &[mps_runner::mps::Vector<D>],
+    indices: impl Iterator<Item = usize>,
+) -> f64 {
+    indices.fold(f64::MIN, |top, i| top.max(position_m[i][D - 1]))
 }
 
 /// What the steps cost, stage by stage (wall seconds, CG iterations a step; the rows of
@@ -418,10 +424,7 @@ fn locate<const D: usize>(solver: &Solver<D>, spacing_m: f64) {
         })
         .collect();
     let threshold = solver.config.surface_threshold;
-    let top_m = spots
-        .iter()
-        .map(|s| p.position_m[s.index][D - 1])
-        .fold(f64::MIN, f64::max);
+    let top_m = highest(&p.position_m, spots.iter().map(|s| s.index));
     let deep = |s: &Spot| p.position_m[s.index][D - 1] < top_m - 3.0 * spacing_m;
     println!(
         "# wall distance (l0): particles  mean_speed_m_s  max_speed_m_s  flowing  mean_n/n0  \

@@ -97,6 +97,8 @@ pub struct SolverConfig<const D: usize> {
     /// pressure exceeds `deep_surface_pressure_pa` is on the free surface only if n* is
     /// also below this share of n0 (0 = the threshold alone).
     pub deep_surface_threshold: f64,
+    /// The carried pressure above which `deep_surface_threshold` applies (rho g times the
+    /// manifest's `deep_surface_head` spacings).
     pub deep_surface_pressure_pa: f64,
     /// Incremental scheme: time constant T (s) of the carried pressure's smoothing toward
     /// the mean of its fluid neighbours' p_j - G_i . r_ij (0 = off; see
