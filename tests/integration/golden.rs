@@ -17,6 +17,10 @@
 //! smoke run took `mps.ppe_preconditioner=jacobi`, with which they give their values before,
 //! and the heap and the smoke run under revision 3 were minted (the 3D slump is the same
 //! under revisions 2 and 3).
+//! When revision 5 gave the quiet 3D yield set the increment's regularisation
+//! (`mps.increment_regularisation: 5` at `mps.regularisation_radius: 1.45`), the two 3D
+//! slump cases of revisions 1 and 2 took `mps.increment_regularisation=0`, with which they
+//! give their values before, and the slump under revision 5 was minted.
 use crate::common;
 
 /// (experiment file, overrides, final checkpoint SHA-256).
@@ -131,6 +135,7 @@ const CASES: &[(&str, &[&str], &str)] = &[
             "scene.lift_height_m=0.05",
             "mps.preset=quiet",
             "mps.wall_face_normals=false",
+            "mps.increment_regularisation=0",
         ],
         "f3e6279cbf766c7cf7d6e3da9b62076f1dbb3e196af3c73b28ba708d8b114483",
     ),
@@ -152,6 +157,7 @@ const CASES: &[(&str, &[&str], &str)] = &[
             "time.end_s=0.4",
             "scene.lift_height_m=0.05",
             "mps.preset=quiet",
+            "mps.increment_regularisation=0",
         ],
         "acc690ddbaa93d6c58a550b114b6874020035a360f48ceddc5b913afa0e59b45",
     ),
@@ -174,6 +180,18 @@ const CASES: &[(&str, &[&str], &str)] = &[
         "smoke_2d.yaml",
         &[],
         "ddd53deabfeb3113c6a3ba56b1d6f578c67598f0fd25f1bff3cddcbc77e90049",
+    ),
+    // Revision 5 (the increment's regularisation in the quiet 3D yield set), minted with it:
+    // the 3D slump under `mps.preset=quiet`.
+    (
+        "slump_3d.yaml",
+        &[
+            "spacing_m=0.025",
+            "time.end_s=0.4",
+            "scene.lift_height_m=0.05",
+            "mps.preset=quiet",
+        ],
+        "11717747548a13500ed22f6944114f8d166f7da2db113e814b16db40c06ef3a1",
     ),
 ];
 

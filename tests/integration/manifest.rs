@@ -1394,6 +1394,12 @@ const QUIET_YIELD: [&str; 7] = [
     "mps.wall_face_normals=true",
 ];
 
+/// What it adds for a fluid with a yield stress in 3D (since preset revision 5).
+const QUIET_3D_YIELD: [&str; 2] = [
+    "mps.regularisation_radius=1.45",
+    "mps.increment_regularisation=5",
+];
+
 /// Preset revision 2 adds the walls' own faces to the quiet yield set. Revision 1, under which
 /// older files are taken back up, has none; water gets none at any revision.
 #[test]
@@ -1530,6 +1536,59 @@ fn the_2d_quiet_set_takes_the_acoustic_step_bound_from_revision_4() {
     assert!(experiment::load(&common::experiment("smoke_2d.yaml"), &off).is_ok());
 }
 
+/// Preset revision 5 gives the quiet 3D yield set the increment's regularisation (beta 5 at
+/// the 3D radius 1.45); revision 4 has none, 2D and water none at any revision. A revision-5
+/// run is revision 4's with the two fields written out (same hash), `standard` takes them
+/// back, and a file's own value wins.
+#[test]
+fn the_3d_quiet_yield_set_takes_the_increments_regularisation_from_revision_5() {
+    use mps_runner::manifest::PRESET_REVISION;
+    const { assert!(PRESET_REVISION >= 5) };
+    let slump = |sets: &[&str], revision: u32| {
+        as_of(
+            "slump_3d.yaml",
+            &[&["mps.preset=quiet"], sets].concat(),
+            revision,
+        )
+    };
+    let now = slump(&[], 5).manifest.mps;
+    assert_eq!(now.increment_regularisation, 5.0);
+    assert_eq!(now.regularisation_radius, 1.45);
+    let before = slump(&[], 4).manifest.mps;
+    assert_eq!(before.increment_regularisation, 0.0);
+    assert_eq!(before.regularisation_radius, 1.5);
+    assert_eq!(slump(&[], 5).hash_hex, slump(&QUIET_3D_YIELD, 4).hash_hex);
+    assert_ne!(slump(&[], 5).hash_hex, slump(&[], 4).hash_hex);
+    assert_eq!(
+        slump(&["mps.increment_regularisation=2"], 5)
+            .manifest
+            .mps
+            .increment_regularisation,
+        2.0
+    );
+    let standard = load_exp("slump_3d.yaml", &["mps.preset=standard"])
+        .manifest
+        .mps;
+    assert_eq!(standard.increment_regularisation, 0.0);
+    assert_eq!(standard.regularisation_radius, 1.5);
+    let water_3d = as_of(
+        "tank_at_rest.yaml",
+        &[
+            "dimension=3",
+            "scene.tank_width_m=0.3",
+            "scene.fill_height_m=0.2",
+            "mps.preset=quiet",
+        ],
+        5,
+    )
+    .manifest
+    .mps;
+    assert_eq!(water_3d.increment_regularisation, 0.0);
+    let heap_2d = as_of("column_collapse_2d.yaml", &[], 5).manifest.mps;
+    assert_eq!(heap_2d.increment_regularisation, 0.0);
+    assert_eq!(heap_2d.regularisation_radius, 1.5);
+}
+
 /// A shipped experiment with `sets`, resolved under the default `quiet` as preset
 /// `revision` resolved it.
 fn as_of(file: &str, sets: &[&str], revision: u32) -> Resolved {
@@ -1548,7 +1607,7 @@ fn load_exp(file: &str, sets: &[&str]) -> Resolved {
 #[test]
 fn the_quiet_preset_is_its_fields_written_out() {
     let yield_2d = [&QUIET_ALL[..], &QUIET_2D_ONLY, &QUIET_YIELD].concat();
-    let yield_3d = [&QUIET_ALL[..], &QUIET_YIELD].concat();
+    let yield_3d = [&QUIET_ALL[..], &QUIET_YIELD, &QUIET_3D_YIELD].concat();
     let water_2d = [&QUIET_ALL[..], &QUIET_2D_ONLY].concat();
     let water_3d = [
         "dimension=3",
