@@ -162,8 +162,14 @@ fn step_on<const D: usize>(
     println!("t_s  mean_ke_j  max_ke_j  max_speed_m_s  non_flowing  steps");
     let (mut sum, mut count, mut max_ke, mut next) = (0.0, 0usize, 0.0f64, start + every_s);
     // The step as the run took it (clamped to the manifest's end time, not to ours), so that
-    // nothing changed means the recorded steps; stop at the first step that reaches `end`.
-    let horizon_s = m.time.end_s.max(end);
+    // nothing changed means the recorded steps; stop at the first step that reaches `end`. An
+    // `end` that is the manifest's own but for the round-off of the checkpoint's time (a run
+    // taken up to its last checkpoint) is the manifest's: its last step lands there.
+    let horizon_s = if end <= m.time.end_s * (1.0 + 1e-9) {
+        m.time.end_s
+    } else {
+        end
+    };
     while solver.time_s < end - 1e-9 {
         let dt = solver.next_dt_s(horizon_s);
         let stepped = solver.step(dt);
