@@ -70,7 +70,8 @@ impl PresetName {
 ///    `mps.regularisation_radius: 1.45`: without a stabiliser that grows with compression,
 ///    deep disordered 3D material boils under the quiet set (a rock bed after its pour at 3.7
 ///    J, a deep layer at rest at 0.06 J; with it 1.6e-2 J and 1.6e-10 J), where the 2D set's
-///    pressure regularisation brakes thin 3D layers (docs/validation.md, "The increment's
+///    pressure regularisation brakes thin 3D layers. Water gets none: it stirs the still 3D
+///    tank (docs/validation.md, "The quiet 3D yield set takes the increment's
 ///    regularisation").
 pub const PRESET_REVISION: u32 = 5;
 

@@ -353,10 +353,11 @@ fn a_3d_layer_between_slipping_side_walls_holds_below_h_c_and_slides_at_u_above(
 /// side walls) under the quiet 3D set: without a stabiliser of the arrangement it boils at
 /// 0.04-0.34 m/s for as long as it runs (the 3D set's instability in deep disordered
 /// material: the rock bed's boil without the rocks); with `mps.increment_regularisation` 5
-/// (the quiet 3D yield set's since the preset's revision 5) it calms to rest with brief bursts of a few mm/s (docs/validation.md, "The increment's
-/// regularisation"). Measured over [1.5, 2] s: mean kinetic energy 4.3e-8 against 2.1e-3 J,
-/// largest speed mostly 1e-4 m/s (bursts to 5.4 mm/s) against never below 0.044 m/s, 100
-/// against 0.4 % non-flowing at the end.
+/// (the quiet 3D yield set's since the preset's revision 5) it calms to rest with brief
+/// bursts of a few mm/s (docs/validation.md, "The increment's regularisation"). Measured
+/// over [1.5, 2] s: mean kinetic energy 4.3e-8 against 2.1e-3 J, largest speed mostly 1e-4
+/// m/s (bursts to 5.4 mm/s) against never below 0.044 m/s, 100 against 0.4 % non-flowing at
+/// the end.
 #[test]
 fn a_deep_disordered_3d_layer_at_rest_boils_unless_the_increment_is_regularised() {
     let run = |sets: &[&str]| {
