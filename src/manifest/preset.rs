@@ -163,24 +163,24 @@ const SOLVER_CHOICES: [&str; 2] = ["mps.ppe_preconditioner", "mps.multigrid_over
 /// for a fluid that has it), at its default; not the solver choices.
 fn standard_values(target: Target, revision: u32) -> Vec<(&'static str, Value)> {
     let defaults = serde_json::to_value(Mps::default()).expect("Mps serializes");
-    // The fields of either dimension, each once (2D's first, in their order).
-    let mut all = Vec::new();
+    // The paths of either dimension, each once (2D's first, in their order); the quiet
+    // values themselves are not needed.
+    let mut paths: Vec<&'static str> = Vec::new();
     for dimension in [2, 3] {
-        for (path, value) in quiet_values(
-            Target {
-                dimension,
-                yield_stress: true,
-            },
-            revision,
-        ) {
-            if !all.iter().any(|(p, _)| *p == path) {
-                all.push((path, value));
+        let target = Target {
+            dimension,
+            yield_stress: true,
+        };
+        for (path, _) in quiet_values(target, revision) {
+            if !paths.contains(&path) {
+                paths.push(path);
             }
         }
     }
-    all.into_iter()
-        .filter(|(path, _)| !SOLVER_CHOICES.contains(path))
-        .filter_map(|(path, _)| match path.split_once('.') {
+    paths
+        .into_iter()
+        .filter(|path| !SOLVER_CHOICES.contains(path))
+        .filter_map(|path| match path.split_once('.') {
             Some(("mps", key)) => Some((path, defaults[key].clone())),
             // The only time field: no acoustic bound by default.
             Some(("time", _)) => Some((path, Value::Null)),
