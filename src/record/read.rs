@@ -192,6 +192,13 @@ fn frame(buf: &[u8], at: usize) -> std::result::Result<Option<Framed<'_>>, Strin
     let opcode = rest[0];
     let len = u64::from_le_bytes(rest[1..9].try_into().expect("8 bytes"));
     let available = (rest.len() - RECORD_PREFIX_BYTES) as u64;
+    if opcode == op::CHUNK && len == u64::MAX {
+        // The mcap writer streams a chunk with this placeholder length and fills in the real
+        // one when it closes the chunk: a run in progress, or killed while writing it.
+        return Err(format!(
+            "the chunk at byte {at} is still open (its length is written when it closes)"
+        ));
+    }
     if len > available {
         return Err(format!(
             "the {} record at byte {at} needs {len} bytes, {available} remain",
@@ -322,5 +329,47 @@ fn walk(path: &Path, mut on_message: impl FnMut(u64, Logged)) -> Result<Walked> 
                 reason: p.reason,
             }),
         }),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn record(opcode: u8, len: u64, body: &[u8]) -> Vec<u8> {
+        let mut b = vec![opcode];
+        b.extend_from_slice(&len.to_le_bytes());
+        b.extend_from_slice(body);
+        b
+    }
+
+    #[test]
+    fn an_open_chunk_is_named_as_open_not_as_a_length_of_two_to_the_64() {
+        let buf = record(op::CHUNK, u64::MAX, &[0; 44]);
+        let why = frame(&buf, 0).err().unwrap();
+        assert_eq!(
+            why,
+            "the chunk at byte 0 is still open (its length is written when it closes)"
+        );
+        // Any other length past the end is still reported with its numbers.
+        let buf = record(op::CHUNK, 100, &[0; 44]);
+        assert_eq!(
+            frame(&buf, 0).err().unwrap(),
+            "the chunk record at byte 0 needs 100 bytes, 44 remain"
+        );
+        let buf = record(op::METADATA, u64::MAX, &[0; 4]);
+        assert!(
+            frame(&buf, 0)
+                .err()
+                .unwrap()
+                .contains("needs 18446744073709551615 bytes")
+        );
+        // A whole record frames.
+        let buf = record(op::CHUNK, 3, &[1, 2, 3]);
+        let framed = frame(&buf, 0).unwrap().unwrap();
+        assert_eq!(
+            (framed.opcode, framed.body, framed.end),
+            (op::CHUNK, &[1u8, 2, 3][..], 12)
+        );
     }
 }
