@@ -137,6 +137,7 @@ pub fn canonical_text<S: SceneSection>(manifest: &Manifest<S>) -> String {
                 "yield_tolerance_1_s",
                 "yield_penalty_adaptive",
                 "yield_consistent_divergence",
+                "yield_volumetric_limit",
             ] {
                 mps.remove(key);
             }
@@ -180,6 +181,7 @@ pub fn canonical_text<S: SceneSection>(manifest: &Manifest<S>) -> String {
         ("mps", "wall_collision_second_pass"),
         ("mps", "strain_rate_radius"),
         ("mps", "viscous_laplacian_radius"),
+        ("mps", "yield_volumetric_limit"),
         ("mps", "solid_wall_layers"),
         ("time", "dt_min_s"),
         ("time", "acoustic_courant"),

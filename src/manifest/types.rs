@@ -416,6 +416,11 @@ pub struct Mps {
     /// corrected gradient's adjoint, as before.
     #[serde(default)]
     pub yield_consistent_divergence: bool,
+    /// The yield solve's law on the deviatoric strain rate alone (von Mises), its volumetric
+    /// part held rigid up to this factor times sqrt(2) tau_y on its own
+    /// (`src/mps/yield_solve.rs`); null = one limit on the whole tensor, as before.
+    #[serde(default)]
+    pub yield_volumetric_limit: Option<f64>,
     /// Artificial compressibility on the PPE diagonal, in 1/Pa.
     #[serde(default = "default_compressibility_1_pa")]
     pub compressibility_1_pa: f64,
@@ -529,6 +534,7 @@ impl Default for Mps {
             yield_velocity_fraction: 0.0,
             yield_anderson_depth: 0,
             yield_consistent_divergence: false,
+            yield_volumetric_limit: None,
             compressibility_1_pa: default_compressibility_1_pa(),
             collision_distance: default_collision_distance(),
             collision_restitution: default_collision_restitution(),

@@ -408,6 +408,19 @@ pub fn check<S: SceneSection>(m: &Manifest<S>) -> Vec<Issue> {
             "needs mps.yield_penalty_pa_s > 0 (it corrects the yield solve's operator)".to_string(),
         );
     }
+    if let Some(limit) = p.yield_volumetric_limit
+        && c.real(
+            "mps.yield_volumetric_limit",
+            limit,
+            between(0.0, true, 1e6, true),
+        )
+        && p.yield_penalty_pa_s == 0.0
+    {
+        c.fail(
+            "mps.yield_volumetric_limit",
+            "needs mps.yield_penalty_pa_s > 0 (it sets the yield solve's law)".to_string(),
+        );
+    }
     if p.yield_velocity_fraction != 0.0 && p.yield_penalty_pa_s == 0.0 {
         c.fail(
             "mps.yield_velocity_fraction",

@@ -798,8 +798,11 @@ pub fn predict_velocity<const D: usize>(
         let mut stress = vec![Tensor::<D>::zeros(); n];
         for (k, &i) in rows.iter().enumerate() {
             velocity[i] = Vector::<D>::from(x[k]);
-            // Pi = 2 gamma : gamma, the law's strain rate (0 where rigid).
-            strain[i] = 2.0 * outcome.strain_rate[k].norm_squared();
+            // Pi of the law's strain rate (0 where rigid).
+            strain[i] = super::yield_solve::strain_invariant(
+                &outcome.strain_rate[k],
+                yield_settings.volumetric_limit,
+            );
             stress[i] = outcome.stress_pa[k];
         }
         return ViscousStage {

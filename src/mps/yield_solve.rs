@@ -15,7 +15,8 @@
 //!    the linear part of e (e = E u + e0, e0 from the walls' known velocities) and E^T its
 //!    transpose, the discrete divergence that is E's adjoint (equal particle volumes);
 //! 2. gamma_i: theta = lambda_i + r e_i(u); gamma_i = 0 if |theta| <= sqrt(2) tau_y (rigid),
-//!    else (|theta| - sqrt(2) tau_y) theta / (r |theta|);
+//!    else (|theta| - sqrt(2) tau_y) theta / (r |theta|) (with `volumetric_limit`, the
+//!    deviatoric and isotropic parts of theta each by their own limit: [`law_step`]);
 //! 3. lambda_i += r (e_i(u) - gamma_i).
 //!
 //! A particle is rigid when the stress that holds it is below the yield stress, not when its
@@ -66,6 +67,10 @@ pub struct YieldSolve {
     /// Anderson acceleration of the iterations over the last this many of them
     /// ([`super::anderson`]); 0: plain iterations.
     pub anderson_depth: u32,
+    /// With `Some(c)`, the law's step limits the deviatoric part of the stress by
+    /// sqrt(2) tau_y (von Mises) and its isotropic part by c sqrt(2) tau_y, each on its own
+    /// (see [`law_step`]); `None`: one limit on the whole tensor.
+    pub volumetric_limit: Option<f64>,
 }
 
 /// Residual balancing (He, Yang & Wang 2000; Boyd et al. 2011, sec. 3.4.1): the penalty is
@@ -516,14 +521,7 @@ pub(crate) fn solve<const D: usize>(
         settings.penalty_pa_s
     };
     let limit = std::f64::consts::SQRT_2 * yield_stress_pa;
-    let shrink = |theta: &Tensor<D>, r: f64| {
-        let size = theta.norm();
-        if size <= limit {
-            Tensor::<D>::zeros()
-        } else {
-            theta * ((size - limit) / (r * size))
-        }
-    };
+    let shrink = |theta: &Tensor<D>, r: f64| law_step(theta, r, limit, settings.volumetric_limit);
     let normal = op.normal_diagonal();
     let inverse_diagonal = |r: f64| -> Vec<[f64; D]> {
         map_particles(n, |k| {
@@ -628,6 +626,47 @@ pub(crate) fn solve<const D: usize>(
         stress_pa: lambda,
         penalty_pa_s: if settings.adaptive { r } else { 0.0 },
         solve: report,
+    }
+}
+
+/// The law's step (step 2 of the iterations): gamma = argmin F(g) + r/2 |g - theta / r|^2,
+/// F the yield term. With `volumetric: None`, F(g) = limit |g| on the whole tensor, so the
+/// multiplier's isotropic part (a pressure-like stress that holds the velocity's discrete
+/// divergence) shares the limit with the deviatoric part. With `Some(c)`, F(g) = limit
+/// |dev g| + c limit |iso g|: Bingham's criterion (von Mises) on the deviatoric part alone,
+/// the isotropic part held rigid up to its own limit c limit (c = 0: not at all).
+pub(crate) fn law_step<const D: usize>(
+    theta: &Tensor<D>,
+    r: f64,
+    limit: f64,
+    volumetric: Option<f64>,
+) -> Tensor<D> {
+    let soft = |part: Tensor<D>, bound: f64| {
+        let size = part.norm();
+        if size <= bound {
+            Tensor::<D>::zeros()
+        } else {
+            part * ((size - bound) / (r * size))
+        }
+    };
+    match volumetric {
+        None => soft(*theta, limit),
+        Some(c) => {
+            let iso = Tensor::<D>::identity() * (theta.trace() / D as f64);
+            soft(theta - iso, limit) + soft(iso, c * limit)
+        }
+    }
+}
+
+/// Pi = 2 g : g of the law's strain rate, the deviatoric part's with `volumetric` set (the
+/// criterion's, see [`law_step`]): what counts a particle as flowing.
+pub(crate) fn strain_invariant<const D: usize>(g: &Tensor<D>, volumetric: Option<f64>) -> f64 {
+    match volumetric {
+        None => 2.0 * g.norm_squared(),
+        Some(_) => {
+            let iso = Tensor::<D>::identity() * (g.trace() / D as f64);
+            2.0 * (g - iso).norm_squared()
+        }
     }
 }
 
@@ -739,6 +778,48 @@ fn conjugate_gradient<const D: usize>(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The law's step with the volumetric part on its own limit: a stress whose deviatoric
+    /// part is inside the yield limit stays rigid however large its isotropic part (up to
+    /// c limit), where the whole tensor's limit lets it yield; past the limits each part
+    /// shrinks by its own; the invariant then counts only the deviatoric strain rate.
+    #[test]
+    fn the_volumetric_limit_keeps_the_deviatoric_criterion_whole() {
+        let (r, limit) = (1000.0, 2f64.sqrt() * 50.0);
+        let dev = Tensor::<3>::new(0.0, 40.0, 0.0, 40.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+        let iso = Tensor::<3>::identity() * 30.0;
+        let theta = dev + iso;
+        assert!(dev.norm() < limit && theta.norm() > limit);
+        // One limit on the whole tensor: it yields.
+        let shared = law_step::<3>(&theta, r, limit, None);
+        assert!(shared.norm() > 0.0);
+        assert_eq!(
+            shared,
+            theta * ((theta.norm() - limit) / (r * theta.norm()))
+        );
+        // Its own limit (c = 1, iso.norm() = 52 < 70.7): rigid, gamma = 0 exactly.
+        assert_eq!(
+            law_step::<3>(&theta, r, limit, Some(1.0)),
+            Tensor::<3>::zeros()
+        );
+        // c = 0: the isotropic part is never held; it passes to gamma whole (theta / r).
+        assert_eq!(law_step::<3>(&theta, r, limit, Some(0.0)), iso / r);
+        // Past the deviatoric limit the deviatoric part shrinks by the limit alone: the
+        // multiplier left (theta - r gamma) keeps the isotropic part whole and its
+        // deviatoric part sits on the limit; gamma is traceless.
+        let big = dev * 2.0 + iso;
+        let g = law_step::<3>(&big, r, limit, Some(1.0));
+        let left = big - g * r;
+        assert!(((left - iso).norm() - limit).abs() < 1e-12);
+        assert!((g.trace()).abs() < 1e-15);
+        // The invariant: 2 g : g as before without the limit; the deviatoric part's with it.
+        let mixed = g + Tensor::<3>::identity() * 0.5;
+        assert_eq!(
+            strain_invariant::<3>(&mixed, None),
+            2.0 * mixed.norm_squared()
+        );
+        assert!((strain_invariant::<3>(&mixed, Some(1.0)) - 2.0 * g.norm_squared()).abs() < 1e-12);
+    }
 
     /// A block of `cells`^D fluid particles on a lattice of spacing 1, each moved by up to
     /// `disorder` (a fixed 64-bit LCG), with the neighbours, the strain radius 1.5 and every

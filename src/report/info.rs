@@ -232,6 +232,7 @@ pub fn run_info(path: &Path, size_bytes: u64, run: &RunFile) -> RunInfo {
                 "yield_velocity_fraction",
                 "yield_anderson_depth",
                 "yield_consistent_divergence",
+                "yield_volumetric_limit",
             ] {
                 if let Some(v) = mps.and_then(|mps| mps.get(key)) {
                     text.push_str(&format!(", mps.{key} {v}"));

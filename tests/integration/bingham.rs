@@ -283,6 +283,7 @@ const POISEUILLE_SOLVE: YieldSolve = YieldSolve {
     velocity_fraction: 0.0,
     consistent_divergence: None,
     anderson_depth: 0,
+    volumetric_limit: None,
 };
 
 /// Bingham's law with a rigid state (`mps.yield_penalty_pa_s`, the augmented Lagrangian of

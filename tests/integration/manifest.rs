@@ -1016,6 +1016,10 @@ fn invalid_values_are_named_and_located() {
             r#""yield_consistent_divergence":true"#,
         ),
         ("mps.yield_anderson_depth=5", r#""yield_anderson_depth":5"#),
+        (
+            "mps.yield_volumetric_limit=1",
+            r#""yield_volumetric_limit":1"#,
+        ),
     ] {
         let before = ok_with(&heap, &sets).hash_hex;
         sets.push(set);
@@ -1027,6 +1031,34 @@ fn invalid_values_are_named_and_located() {
             after.canonical
         );
     }
+
+    // The volumetric limit: null is the whole tensor's limit, as before (no part of the
+    // experiment); a factor is in [0, 1e6] and needs the yield solve.
+    assert_eq!(
+        ok_with(
+            &heap,
+            &[&yield_solve[..], &["mps.yield_volumetric_limit=null"]].concat()
+        )
+        .hash_hex,
+        exact.hash_hex
+    );
+    let e = err_with(
+        &heap,
+        &[&yield_solve[..], &["mps.yield_volumetric_limit=-1"]].concat(),
+    );
+    assert_invalid(
+        &e,
+        "mps.yield_volumetric_limit",
+        None,
+        &["[0, 1000000]", "-1"],
+    );
+    let e = err_with(MINIMAL, &["mps.yield_volumetric_limit=1"]);
+    assert_invalid(
+        &e,
+        "mps.yield_volumetric_limit",
+        None,
+        &["needs mps.yield_penalty_pa_s > 0"],
+    );
 
     // from an override: no line, says so
     let e = err_with(MINIMAL, &["time.courant=1.5"]);

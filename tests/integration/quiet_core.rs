@@ -1002,6 +1002,7 @@ fn checkerboard_left(smoothing_s: f64) -> (f64, f64) {
         velocity_fraction: 0.1,
         consistent_divergence: None,
         anderson_depth: 0,
+        volumetric_limit: None,
     });
     cfg.wall_surface_no_slip = true;
     cfg.pressure_scheme = PressureScheme::Incremental;
