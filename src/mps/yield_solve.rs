@@ -652,7 +652,7 @@ pub(crate) fn law_step<const D: usize>(
     match volumetric {
         None => soft(*theta, limit),
         Some(c) => {
-            let iso = Tensor::<D>::identity() * (theta.trace() / D as f64);
+            let iso = isotropic_part(theta);
             soft(theta - iso, limit) + soft(iso, c * limit)
         }
     }
@@ -663,11 +663,13 @@ pub(crate) fn law_step<const D: usize>(
 pub(crate) fn strain_invariant<const D: usize>(g: &Tensor<D>, volumetric: Option<f64>) -> f64 {
     match volumetric {
         None => 2.0 * g.norm_squared(),
-        Some(_) => {
-            let iso = Tensor::<D>::identity() * (g.trace() / D as f64);
-            2.0 * (g - iso).norm_squared()
-        }
+        Some(_) => 2.0 * (g - isotropic_part(g)).norm_squared(),
     }
+}
+
+/// (tr t / D) I: the isotropic part of a tensor (the rest is its deviatoric part).
+fn isotropic_part<const D: usize>(t: &Tensor<D>) -> Tensor<D> {
+    Tensor::<D>::identity() * (t.trace() / D as f64)
 }
 
 /// (lambda_k, r gamma_k) per row, one flat vector (the accelerated iteration's variable).
