@@ -346,6 +346,9 @@ pub struct StepReport {
     pub dt_s: f64,
     pub ppe: SolveReport,
     pub viscosity: SolveReport,
+    /// The yield solve's iterations in the step (0 without it); `viscosity` sums their CG
+    /// iterations.
+    pub yield_iterations: u32,
     /// Share of fluid particles that were non-flowing (Pi <= Pi_c) at the start of the step.
     pub non_flowing_fraction: f64,
     pub surface_count: usize,
@@ -685,6 +688,7 @@ impl<const D: usize> Solver<D> {
             dt_s,
             ppe,
             viscosity: stage.solve,
+            yield_iterations: stage.yield_iterations,
             non_flowing_fraction,
             surface_count,
         })

@@ -366,6 +366,8 @@ pub struct ViscousStage<const D: usize> {
     /// With the yield solve's adaptive penalty, the penalty the next step starts from (Pa s);
     /// 0 otherwise.
     pub yield_penalty_pa_s: f64,
+    /// The yield solve's iterations in this step; 0 without it.
+    pub yield_iterations: u32,
 }
 
 /// Velocity gradient G_ab = d u_a / d x_b at fluid particle i by the gradient model (eq. 3,
@@ -673,6 +675,7 @@ pub fn predict_velocity<const D: usize>(
             solve,
             yield_stress_pa: Vec::new(),
             yield_penalty_pa_s: 0.0,
+            yield_iterations: 0,
         };
     }
     let mut row_of = vec![u32::MAX; n];
@@ -811,6 +814,7 @@ pub fn predict_velocity<const D: usize>(
             solve: outcome.solve,
             yield_stress_pa: stress,
             yield_penalty_pa_s: outcome.penalty_pa_s,
+            yield_iterations: outcome.iterations,
         };
     }
     let reports = solve_pcg_many(
@@ -840,6 +844,7 @@ pub fn predict_velocity<const D: usize>(
         solve,
         yield_stress_pa: Vec::new(),
         yield_penalty_pa_s: 0.0,
+        yield_iterations: 0,
     }
 }
 

@@ -475,6 +475,9 @@ pub(crate) struct YieldOutcome<const D: usize> {
     /// With the adaptive penalty, the penalty at the end of the step, in Pa s, carried to the
     /// next; 0 otherwise.
     pub penalty_pa_s: f64,
+    /// The augmented-Lagrangian iterations the step ran (at most `max_iterations`; equal to it
+    /// when the step stopped at the cap rather than on its tolerance).
+    pub iterations: u32,
     /// CG iterations summed over the u steps, the largest relative residual, and whether the
     /// iterations met their tolerance.
     pub solve: SolveReport,
@@ -545,7 +548,9 @@ pub(crate) fn solve<const D: usize>(
     };
     let mut anderson =
         (settings.anderson_depth > 0).then(|| Anderson::new(settings.anderson_depth as usize));
+    let mut iterations = 0;
     for iteration in 0..settings.max_iterations {
+        iterations = iteration + 1;
         let load: Vec<Tensor<D>> =
             map_particles(n, |k| lambda[k] + (op.constant[k] - gamma[k]) * r);
         let div = op.apply_transpose(&load);
@@ -625,6 +630,7 @@ pub(crate) fn solve<const D: usize>(
         strain_rate: gamma,
         stress_pa: lambda,
         penalty_pa_s: if settings.adaptive { r } else { 0.0 },
+        iterations,
         solve: report,
     }
 }

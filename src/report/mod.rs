@@ -53,6 +53,7 @@ pub const DIAGNOSTICS_FIELDS: &[&str] = &[
     "viscosity_iterations",
     "viscosity_relative_residual",
     "non_flowing_fraction",
+    "yield_iterations",
     "step",
 ];
 
@@ -69,6 +70,7 @@ pub fn diagnostics_value(d: &Diagnostics, name: &str) -> Option<f64> {
         "viscosity_iterations" => d.viscosity_iterations.into(),
         "viscosity_relative_residual" => d.viscosity_relative_residual,
         "non_flowing_fraction" => d.non_flowing_fraction,
+        "yield_iterations" => d.yield_iterations.into(),
         "step" => d.step.into(),
         "time_s" => d.time_s,
         _ => return d.metrics.get(name).copied(),

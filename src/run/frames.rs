@@ -40,6 +40,7 @@ pub fn diagnostics<const D: usize>(
         viscosity_iterations: report.map_or(0, |r| r.viscosity.iterations),
         viscosity_relative_residual: report.map_or(0.0, |r| r.viscosity.relative_residual),
         non_flowing_fraction: report.map_or(0.0, |r| r.non_flowing_fraction),
+        yield_iterations: report.map_or(0, |r| r.yield_iterations),
         metrics: experiment_metrics(m, p, solver.time_s)
             .into_iter()
             .collect(),

@@ -42,6 +42,7 @@ fn diagnostics_fields(d: &Diagnostics) -> Vec<(&'static str, f64)> {
         ("viscosity_iterations", f64::from(d.viscosity_iterations)),
         ("viscosity_relative_residual", d.viscosity_relative_residual),
         ("non_flowing_fraction", d.non_flowing_fraction),
+        ("yield_iterations", f64::from(d.yield_iterations)),
     ]
 }
 

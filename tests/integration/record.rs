@@ -83,6 +83,7 @@ fn diagnostics(step: u32) -> Diagnostics {
         viscosity_iterations: 4 + step,
         viscosity_relative_residual: 2e-10,
         non_flowing_fraction: 0.25,
+        yield_iterations: 7,
     }
 }
 

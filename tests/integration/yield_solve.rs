@@ -53,6 +53,22 @@ fn a_heap_under_the_yield_solve_comes_to_rest_and_replays_bit_for_bit() {
         (0.93..=1.04).contains(&front_m),
         "front {front_m} m against the full-Bingham 0.97-1.04 m"
     );
+    // Every step after the first row reports the solve's iterations, within its cap, and the
+    // flowing heap takes more than one.
+    let cap = resolved.manifest.mps.yield_max_iterations;
+    let counts: Vec<u32> = run.diagnostics[1..]
+        .iter()
+        .map(|d| d.yield_iterations)
+        .collect();
+    assert_eq!(
+        run.diagnostics[0].yield_iterations, 0,
+        "no step before the first row"
+    );
+    assert!(
+        counts.iter().all(|&k| (1..=cap).contains(&k)),
+        "yield iterations outside 1..={cap}: {counts:?}"
+    );
+    assert!(counts.iter().any(|&k| k > 1), "{counts:?}");
     // One thread: the same bits; a replay from a checkpoint after the flow (its multiplier
     // restored) too.
     let one = common::run_completed(&resolved, &dir.path().join("one"), 1);
