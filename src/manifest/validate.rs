@@ -402,37 +402,39 @@ pub fn check<S: SceneSection>(m: &Manifest<S>) -> Vec<Issue> {
                 .to_string(),
         );
     }
-    if p.yield_consistent_divergence && p.yield_penalty_pa_s == 0.0 {
-        c.fail(
-            "mps.yield_consistent_divergence",
-            "needs mps.yield_penalty_pa_s > 0 (it corrects the yield solve's operator)".to_string(),
-        );
-    }
-    if let Some(limit) = p.yield_volumetric_limit
-        && c.real(
+    let volumetric_set = p.yield_volumetric_limit.is_some_and(|limit| {
+        c.real(
             "mps.yield_volumetric_limit",
             limit,
             between(0.0, true, 1e6, true),
         )
-        && p.yield_penalty_pa_s == 0.0
-    {
-        c.fail(
+    });
+    // Fields that act only inside the yield solve, and what each does there.
+    for (field, set, role) in [
+        (
+            "mps.yield_consistent_divergence",
+            p.yield_consistent_divergence,
+            "it corrects the yield solve's operator",
+        ),
+        (
             "mps.yield_volumetric_limit",
-            "needs mps.yield_penalty_pa_s > 0 (it sets the yield solve's law)".to_string(),
-        );
-    }
-    if p.yield_velocity_fraction != 0.0 && p.yield_penalty_pa_s == 0.0 {
-        c.fail(
+            volumetric_set,
+            "it sets the yield solve's law",
+        ),
+        (
             "mps.yield_velocity_fraction",
-            "needs mps.yield_penalty_pa_s > 0 (it sets how far the yield solve's velocity steps go)"
-                .to_string(),
-        );
-    }
-    if p.yield_anderson_depth != 0 && p.yield_penalty_pa_s == 0.0 {
-        c.fail(
+            p.yield_velocity_fraction != 0.0,
+            "it sets how far the yield solve's velocity steps go",
+        ),
+        (
             "mps.yield_anderson_depth",
-            "needs mps.yield_penalty_pa_s > 0 (it accelerates the yield solve)".to_string(),
-        );
+            p.yield_anderson_depth != 0,
+            "it accelerates the yield solve",
+        ),
+    ] {
+        if set && p.yield_penalty_pa_s == 0.0 {
+            c.fail(field, format!("needs mps.yield_penalty_pa_s > 0 ({role})"));
+        }
     }
     if p.quadratic_strain_rate && p.corrected_strain_rate {
         c.fail(
