@@ -15,7 +15,7 @@
 //! `mps.particle_shifting` (with `mps.particle_shifting_limit`) at 0 (and under the standard
 //! scheme), `mps.pressure_floor_pa` at 0, `mps.yield_penalty_pa_s` at 0 (with
 //! `mps.yield_max_iterations` and `mps.yield_tolerance_1_s`), `mps.yield_velocity_fraction` and
-//! `mps.yield_anderson_depth` at 0, `mps.corrected_strain_rate`, `mps.wall_surface_no_slip`, `mps.wall_face_normals`, `mps.quadratic_strain_rate`
+//! `mps.yield_anderson_depth` at 0, `mps.yield_penalty_local`, `mps.corrected_strain_rate`, `mps.wall_surface_no_slip`, `mps.wall_face_normals`, `mps.quadratic_strain_rate`
 //! `mps.exact_projection`, `mps.conservative_gradient` and `mps.adjoint_projection` (also under the standard scheme) false, `stop.rest_*` without
 //! `stop.rest_metric`, null `mps.wall_collision_*`, `mps.strain_rate_radius`,
 //! `mps.viscous_laplacian_radius`, `time.dt_min_s`, `time.acoustic_courant`, `stop.max_ghost_particles` and the rod's,
@@ -136,6 +136,7 @@ pub fn canonical_text<S: SceneSection>(manifest: &Manifest<S>) -> String {
                 "yield_max_iterations",
                 "yield_tolerance_1_s",
                 "yield_penalty_adaptive",
+                "yield_penalty_local",
                 "yield_consistent_divergence",
                 "yield_volumetric_limit",
             ] {
@@ -154,6 +155,7 @@ pub fn canonical_text<S: SceneSection>(manifest: &Manifest<S>) -> String {
                 "yield_penalty_adaptive",
                 manifest.mps.yield_penalty_adaptive,
             ),
+            ("yield_penalty_local", manifest.mps.yield_penalty_local),
             (
                 "yield_consistent_divergence",
                 manifest.mps.yield_consistent_divergence,

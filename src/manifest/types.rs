@@ -401,6 +401,11 @@ pub struct Mps {
     /// step to step (in the checkpoints). Off: the penalty stays fixed.
     #[serde(default)]
     pub yield_penalty_adaptive: bool,
+    /// Each row of the yield solve gets its own penalty, the law's secant viscosity at the
+    /// step's start, at most `yield_penalty_pa_s` (`src/mps/yield_solve.rs`, `row_weights`).
+    /// Off: one penalty for every row, as before.
+    #[serde(default)]
+    pub yield_penalty_local: bool,
     /// Each iteration's velocity solve stops once its residual bounds the strain-rate error it
     /// leaves to this fraction of `yield_tolerance_1_s` (`src/mps/yield_solve.rs`, inexact
     /// u steps); 0 = solve to `viscosity_tolerance`, as before.
@@ -531,6 +536,7 @@ impl Default for Mps {
             yield_max_iterations: default_yield_max_iterations(),
             yield_tolerance_1_s: default_yield_tolerance_1_s(),
             yield_penalty_adaptive: false,
+            yield_penalty_local: false,
             yield_velocity_fraction: 0.0,
             yield_anderson_depth: 0,
             yield_consistent_divergence: false,

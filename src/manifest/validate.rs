@@ -431,6 +431,11 @@ pub fn check<S: SceneSection>(m: &Manifest<S>) -> Vec<Issue> {
             p.yield_anderson_depth != 0,
             "it accelerates the yield solve",
         ),
+        (
+            "mps.yield_penalty_local",
+            p.yield_penalty_local,
+            "it sets the yield solve's penalty per row",
+        ),
     ] {
         if set && p.yield_penalty_pa_s == 0.0 {
             c.fail(field, format!("needs mps.yield_penalty_pa_s > 0 ({role})"));

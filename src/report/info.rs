@@ -229,6 +229,7 @@ pub fn run_info(path: &Path, size_bytes: u64, run: &RunFile) -> RunInfo {
                 "yield_max_iterations",
                 "yield_tolerance_1_s",
                 "yield_penalty_adaptive",
+                "yield_penalty_local",
                 "yield_velocity_fraction",
                 "yield_anderson_depth",
                 "yield_consistent_divergence",

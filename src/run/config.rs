@@ -63,6 +63,7 @@ pub fn solver_config<const D: usize>(m: &Manifest, scene: &Scene<D>) -> SolverCo
                 .yield_consistent_divergence
                 .then_some(m.mps.surface_threshold),
             volumetric_limit: m.mps.yield_volumetric_limit,
+            local_penalty: m.mps.yield_penalty_local,
         }),
         gravity_m_s2: m.gravity_m_s2,
         gravity_tilt_rad: scene.gravity_tilt_rad,

@@ -1003,6 +1003,7 @@ fn checkerboard_left(smoothing_s: f64) -> (f64, f64) {
         consistent_divergence: None,
         anderson_depth: 0,
         volumetric_limit: None,
+        local_penalty: false,
     });
     cfg.wall_surface_no_slip = true;
     cfg.pressure_scheme = PressureScheme::Incremental;
