@@ -735,9 +735,10 @@ fn unpack<const D: usize>(v: &[f64], r: impl Fn(usize) -> f64) -> (Vec<Tensor<D>
 }
 
 /// Local penalties: row k's weight w_k = (mu_p + limit / |e_k|) / r_max, clamped to
-/// [`MIN_PENALTY_FRACTION`, 1], so that its penalty r w_k is the law's secant viscosity at the
-/// strain rate e_k of the step's start (limit = sqrt 2 tau_y, the law's bound on |lambda|), or
-/// r itself where that is larger (a rigid row, e_k = 0). The iterations are the same
+/// [`MIN_PENALTY_FRACTION`, 1], so that at r = r_max its penalty r w_k is the law's secant
+/// viscosity at the strain rate e_k of the step's start (limit = sqrt 2 tau_y, the law's bound
+/// on |lambda|), and r_max itself where that is larger (a rigid row, e_k = 0); the balancing
+/// scales every row's penalty with r. The iterations are the same
 /// augmented Lagrangian with the penalty term sum_k r_k |e_k(u) - gamma_k|^2 / 2 (any fixed
 /// positive r_k give the same minimiser); one r for every row makes flowing rows stiff and
 /// the iterations slow where the law's viscosity is far below the rigid rows' penalty.
