@@ -207,6 +207,11 @@ impl<const D: usize> StrainOperator<D> {
 
     /// E u (without e0).
     fn apply(&self, u: &[[f64; D]]) -> Vec<Tensor<D>> {
+        self.apply_weighted(u, None)
+    }
+
+    /// W E u, row k scaled by `weight[k]` (E u without weights).
+    fn apply_weighted(&self, u: &[[f64; D]], weight: Option<&[f64]>) -> Vec<Tensor<D>> {
         map_particles(self.rows(), |k| {
             let mut g = Tensor::<D>::zeros();
             for e in self.offsets[k]..self.offsets[k + 1] {
@@ -214,7 +219,8 @@ impl<const D: usize> StrainOperator<D> {
                 let x = Neighbours::reflected(c, Vector::<D>::from(u[entry_index(c)]));
                 g += x * self.coefficients[e].transpose();
             }
-            (g + g.transpose()) * 0.5
+            let sym = (g + g.transpose()) * 0.5;
+            weight.map_or(sym, |w| sym * w[k])
         })
     }
 
@@ -577,14 +583,7 @@ pub(crate) fn solve<const D: usize>(
             map_particles(n, |k| std::array::from_fn(|m| mu * b[k][m] - div[k][m]));
         let apply = |u: &[[f64; D]], y: &mut [[f64; D]]| {
             matrix.multiply(u, y);
-            let mut eu = op.apply(u);
-            if let Some(weight) = &weight {
-                eu.par_iter_mut()
-                    .with_min_len(MIN_PARALLEL_LEN)
-                    .zip(weight)
-                    .for_each(|(t, w)| *t *= *w);
-            }
-            let back = op.apply_transpose(&eu);
+            let back = op.apply_transpose(&op.apply_weighted(u, weight.as_deref()));
             y.par_iter_mut()
                 .with_min_len(MIN_PARALLEL_LEN)
                 .zip(&back)
