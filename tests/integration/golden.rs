@@ -21,6 +21,11 @@
 //! (`mps.increment_regularisation: 5` at `mps.regularisation_radius: 1.45`), the two 3D
 //! slump cases of revisions 1 and 2 took `mps.increment_regularisation=0`, with which they
 //! give their values before, and the slump under revision 5 was minted.
+//! When revision 6 gave the quiet 3D yield set local penalties and Anderson acceleration
+//! (`mps.yield_penalty_local: true`, `mps.yield_anderson_depth: 5`,
+//! `mps.yield_max_iterations: 200`), the three 3D slump cases before it took the three fields'
+//! defaults, with which they give their values before, and the slump under revision 6 was
+//! minted.
 use crate::common;
 
 /// (experiment file, overrides, final checkpoint SHA-256).
@@ -136,6 +141,9 @@ const CASES: &[(&str, &[&str], &str)] = &[
             "mps.preset=quiet",
             "mps.wall_face_normals=false",
             "mps.increment_regularisation=0",
+            "mps.yield_penalty_local=false",
+            "mps.yield_anderson_depth=0",
+            "mps.yield_max_iterations=50",
         ],
         "f3e6279cbf766c7cf7d6e3da9b62076f1dbb3e196af3c73b28ba708d8b114483",
     ),
@@ -158,6 +166,9 @@ const CASES: &[(&str, &[&str], &str)] = &[
             "scene.lift_height_m=0.05",
             "mps.preset=quiet",
             "mps.increment_regularisation=0",
+            "mps.yield_penalty_local=false",
+            "mps.yield_anderson_depth=0",
+            "mps.yield_max_iterations=50",
         ],
         "acc690ddbaa93d6c58a550b114b6874020035a360f48ceddc5b913afa0e59b45",
     ),
@@ -190,8 +201,23 @@ const CASES: &[(&str, &[&str], &str)] = &[
             "time.end_s=0.4",
             "scene.lift_height_m=0.05",
             "mps.preset=quiet",
+            "mps.yield_penalty_local=false",
+            "mps.yield_anderson_depth=0",
+            "mps.yield_max_iterations=50",
         ],
         "11717747548a13500ed22f6944114f8d166f7da2db113e814b16db40c06ef3a1",
+    ),
+    // Revision 6 (local penalties and Anderson acceleration in the quiet 3D yield set),
+    // minted with it: the 3D slump under `mps.preset=quiet`.
+    (
+        "slump_3d.yaml",
+        &[
+            "spacing_m=0.025",
+            "time.end_s=0.4",
+            "scene.lift_height_m=0.05",
+            "mps.preset=quiet",
+        ],
+        "919137ba63a8147cb2fc8ad2f11ab01f2a328cb59fd172fae40a8e61408d3959",
     ),
 ];
 

@@ -1426,10 +1426,14 @@ const QUIET_YIELD: [&str; 7] = [
     "mps.wall_face_normals=true",
 ];
 
-/// What it adds for a fluid with a yield stress in 3D (since preset revision 5).
-const QUIET_3D_YIELD: [&str; 2] = [
+/// What it adds for a fluid with a yield stress in 3D (the first two since preset revision 5,
+/// the other three since revision 6).
+const QUIET_3D_YIELD: [&str; 5] = [
     "mps.regularisation_radius=1.45",
     "mps.increment_regularisation=5",
+    "mps.yield_penalty_local=true",
+    "mps.yield_anderson_depth=5",
+    "mps.yield_max_iterations=200",
 ];
 
 /// Preset revision 2 adds the walls' own faces to the quiet yield set. Revision 1, under which
@@ -1589,7 +1593,10 @@ fn the_3d_quiet_yield_set_takes_the_increments_regularisation_from_revision_5() 
     let before = slump(&[], 4).manifest.mps;
     assert_eq!(before.increment_regularisation, 0.0);
     assert_eq!(before.regularisation_radius, 1.5);
-    assert_eq!(slump(&[], 5).hash_hex, slump(&QUIET_3D_YIELD, 4).hash_hex);
+    assert_eq!(
+        slump(&[], 5).hash_hex,
+        slump(&QUIET_3D_YIELD[..2], 4).hash_hex
+    );
     assert_ne!(slump(&[], 5).hash_hex, slump(&[], 4).hash_hex);
     assert_eq!(
         slump(&["mps.increment_regularisation=2"], 5)
@@ -1619,6 +1626,49 @@ fn the_3d_quiet_yield_set_takes_the_increments_regularisation_from_revision_5() 
     let heap_2d = as_of("column_collapse_2d.yaml", &[], 5).manifest.mps;
     assert_eq!(heap_2d.increment_regularisation, 0.0);
     assert_eq!(heap_2d.regularisation_radius, 1.5);
+}
+
+/// Preset revision 6 gives the quiet 3D yield set local penalties and Anderson acceleration
+/// with its 200-iteration cap; revision 5 has none, 2D none at any revision. A revision-6 run
+/// is revision 5's with the three fields written out (same hash), `standard` takes them back,
+/// and a file's own value wins.
+#[test]
+fn the_3d_quiet_yield_set_takes_local_penalties_and_anderson_from_revision_6() {
+    use mps_runner::manifest::PRESET_REVISION;
+    const { assert!(PRESET_REVISION >= 6) };
+    let slump = |sets: &[&str], revision: u32| {
+        as_of(
+            "slump_3d.yaml",
+            &[&["mps.preset=quiet"], sets].concat(),
+            revision,
+        )
+    };
+    let now = slump(&[], 6).manifest.mps;
+    assert!(now.yield_penalty_local);
+    assert_eq!(now.yield_anderson_depth, 5);
+    assert_eq!(now.yield_max_iterations, 200);
+    let before = slump(&[], 5).manifest.mps;
+    assert!(!before.yield_penalty_local);
+    assert_eq!(before.yield_anderson_depth, 0);
+    assert_eq!(before.yield_max_iterations, 50);
+    assert_eq!(
+        slump(&[], 6).hash_hex,
+        slump(&QUIET_3D_YIELD[2..], 5).hash_hex
+    );
+    assert_ne!(slump(&[], 6).hash_hex, slump(&[], 5).hash_hex);
+    let own = slump(&["mps.yield_anderson_depth=2"], 6).manifest.mps;
+    assert_eq!(own.yield_anderson_depth, 2);
+    assert!(own.yield_penalty_local);
+    let standard = load_exp("slump_3d.yaml", &["mps.preset=standard"])
+        .manifest
+        .mps;
+    assert!(!standard.yield_penalty_local);
+    assert_eq!(standard.yield_anderson_depth, 0);
+    assert_eq!(standard.yield_max_iterations, 50);
+    let heap_2d = as_of("column_collapse_2d.yaml", &[], 6).manifest.mps;
+    assert!(!heap_2d.yield_penalty_local);
+    assert_eq!(heap_2d.yield_anderson_depth, 0);
+    assert_eq!(heap_2d.yield_max_iterations, 50);
 }
 
 /// A shipped experiment with `sets`, resolved under the default `quiet` as preset
