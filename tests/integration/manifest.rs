@@ -1580,13 +1580,7 @@ fn the_2d_quiet_set_takes_the_acoustic_step_bound_from_revision_4() {
 fn the_3d_quiet_yield_set_takes_the_increments_regularisation_from_revision_5() {
     use mps_runner::manifest::PRESET_REVISION;
     const { assert!(PRESET_REVISION >= 5) };
-    let slump = |sets: &[&str], revision: u32| {
-        as_of(
-            "slump_3d.yaml",
-            &[&["mps.preset=quiet"], sets].concat(),
-            revision,
-        )
-    };
+    let slump = quiet_slump_as_of;
     let now = slump(&[], 5).manifest.mps;
     assert_eq!(now.increment_regularisation, 5.0);
     assert_eq!(now.regularisation_radius, 1.45);
@@ -1636,13 +1630,7 @@ fn the_3d_quiet_yield_set_takes_the_increments_regularisation_from_revision_5() 
 fn the_3d_quiet_yield_set_takes_local_penalties_and_anderson_from_revision_6() {
     use mps_runner::manifest::PRESET_REVISION;
     const { assert!(PRESET_REVISION >= 6) };
-    let slump = |sets: &[&str], revision: u32| {
-        as_of(
-            "slump_3d.yaml",
-            &[&["mps.preset=quiet"], sets].concat(),
-            revision,
-        )
-    };
+    let slump = quiet_slump_as_of;
     let now = slump(&[], 6).manifest.mps;
     assert!(now.yield_penalty_local);
     assert_eq!(now.yield_anderson_depth, 5);
@@ -1669,6 +1657,15 @@ fn the_3d_quiet_yield_set_takes_local_penalties_and_anderson_from_revision_6() {
     assert!(!heap_2d.yield_penalty_local);
     assert_eq!(heap_2d.yield_anderson_depth, 0);
     assert_eq!(heap_2d.yield_max_iterations, 50);
+}
+
+/// The shipped slump under `mps.preset=quiet` with `sets`, as preset `revision` resolved it.
+fn quiet_slump_as_of(sets: &[&str], revision: u32) -> Resolved {
+    as_of(
+        "slump_3d.yaml",
+        &[&["mps.preset=quiet"], sets].concat(),
+        revision,
+    )
 }
 
 /// A shipped experiment with `sets`, resolved under the default `quiet` as preset
