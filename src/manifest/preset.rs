@@ -148,20 +148,22 @@ fn quiet_values(target: Target, revision: u32) -> Vec<(&'static str, Value)> {
         if revision >= 2 {
             v.push(("mps.wall_face_normals", json!(true)));
         }
-        if target.dimension == 3 && revision >= 5 {
-            // Calms deep disordered 3D material (it acts on a positive increment only); 1.45
-            // keeps the first shell's shear stiffness positive in 3D. Not for water: the
-            // still 3D tank grows a mode under it, 0.6 m/s by 2 s (docs/validation.md).
-            v.push(("mps.regularisation_radius", json!(1.45)));
-            v.push(("mps.increment_regularisation", json!(5.0)));
-        }
-        if target.dimension == 3 && revision >= 6 {
-            // Each row's penalty at the law's secant viscosity, and Anderson acceleration with
-            // the room it needs to converge: in 2D neither pays (the heap takes as many CG
-            // iterations; Anderson slows the 5 mm collapse).
-            v.push(("mps.yield_penalty_local", json!(true)));
-            v.push(("mps.yield_anderson_depth", json!(5)));
-            v.push(("mps.yield_max_iterations", json!(200)));
+        if target.dimension == 3 {
+            if revision >= 5 {
+                // Calms deep disordered 3D material (it acts on a positive increment only);
+                // 1.45 keeps the first shell's shear stiffness positive in 3D. Not for water:
+                // the still 3D tank grows a mode under it, 0.6 m/s by 2 s (docs/validation.md).
+                v.push(("mps.regularisation_radius", json!(1.45)));
+                v.push(("mps.increment_regularisation", json!(5.0)));
+            }
+            if revision >= 6 {
+                // Each row's penalty at the law's secant viscosity, and Anderson acceleration
+                // with the room it needs to converge: in 2D neither pays (the heap takes as
+                // many CG iterations; Anderson slows the 5 mm collapse).
+                v.push(("mps.yield_penalty_local", json!(true)));
+                v.push(("mps.yield_anderson_depth", json!(5)));
+                v.push(("mps.yield_max_iterations", json!(200)));
+            }
         }
     }
     v

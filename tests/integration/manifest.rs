@@ -1426,11 +1426,14 @@ const QUIET_YIELD: [&str; 7] = [
     "mps.wall_face_normals=true",
 ];
 
-/// What it adds for a fluid with a yield stress in 3D (the first two since preset revision 5,
-/// the other three since revision 6).
-const QUIET_3D_YIELD: [&str; 5] = [
+/// What it adds for a fluid with a yield stress in 3D since preset revision 5 ...
+const QUIET_3D_YIELD_REVISION_5: [&str; 2] = [
     "mps.regularisation_radius=1.45",
     "mps.increment_regularisation=5",
+];
+
+/// ... and since revision 6.
+const QUIET_3D_YIELD_REVISION_6: [&str; 3] = [
     "mps.yield_penalty_local=true",
     "mps.yield_anderson_depth=5",
     "mps.yield_max_iterations=200",
@@ -1589,7 +1592,7 @@ fn the_3d_quiet_yield_set_takes_the_increments_regularisation_from_revision_5() 
     assert_eq!(before.regularisation_radius, 1.5);
     assert_eq!(
         slump(&[], 5).hash_hex,
-        slump(&QUIET_3D_YIELD[..2], 4).hash_hex
+        slump(&QUIET_3D_YIELD_REVISION_5, 4).hash_hex
     );
     assert_ne!(slump(&[], 5).hash_hex, slump(&[], 4).hash_hex);
     assert_eq!(
@@ -1641,7 +1644,7 @@ fn the_3d_quiet_yield_set_takes_local_penalties_and_anderson_from_revision_6() {
     assert_eq!(before.yield_max_iterations, 50);
     assert_eq!(
         slump(&[], 6).hash_hex,
-        slump(&QUIET_3D_YIELD[2..], 5).hash_hex
+        slump(&QUIET_3D_YIELD_REVISION_6, 5).hash_hex
     );
     assert_ne!(slump(&[], 6).hash_hex, slump(&[], 5).hash_hex);
     let own = slump(&["mps.yield_anderson_depth=2"], 6).manifest.mps;
@@ -1686,7 +1689,13 @@ fn load_exp(file: &str, sets: &[&str]) -> Resolved {
 #[test]
 fn the_quiet_preset_is_its_fields_written_out() {
     let yield_2d = [&QUIET_ALL[..], &QUIET_2D_ONLY, &QUIET_YIELD].concat();
-    let yield_3d = [&QUIET_ALL[..], &QUIET_YIELD, &QUIET_3D_YIELD].concat();
+    let yield_3d = [
+        &QUIET_ALL[..],
+        &QUIET_YIELD,
+        &QUIET_3D_YIELD_REVISION_5,
+        &QUIET_3D_YIELD_REVISION_6,
+    ]
+    .concat();
     let water_2d = [&QUIET_ALL[..], &QUIET_2D_ONLY].concat();
     let water_3d = [
         "dimension=3",
