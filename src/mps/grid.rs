@@ -963,7 +963,7 @@ mod wide {
     ) -> __m512d {
         // A position is D contiguous f64 (nalgebra's array storage), read at index times D.
         const { assert!(std::mem::size_of::<Vector<D>>() == D * std::mem::size_of::<f64>()) };
-        // Indices are below MAX_PARTICLES (2^29), so u32 compares and i64 offsets hold them.
+        // Indices are below MAX_PARTICLES (2^29), so u32 compares hold them.
         let count = u32::try_from(positions.len()).unwrap_or(u32::MAX);
         if _mm256_cmplt_epu32_mask(j, _mm256_set1_epi32(count as i32)) != 0xff {
             panic!(
@@ -971,17 +971,19 @@ mod wide {
                 positions.len()
             );
         }
-        let j64 = _mm512_cvtepu32_epi64(j);
-        let mut offset = j64;
-        for _ in 1..D {
-            offset = _mm512_add_epi64(offset, j64);
-        }
+        // Eight plain loads per component, not a gather: on AMD Zen 4 `vgatherqpd` is slower
+        // than the loads and inserts it stands for (the 3D rock fill 0.92x, the 16 mm slump
+        // 0.98x), and the values, hence the bits, are the same.
+        let mut idx = [0u32; 8];
+        // SAFETY: eight lanes into eight.
+        unsafe { _mm256_storeu_si256(idx.as_mut_ptr().cast(), j) };
         let base = positions.as_ptr().cast::<f64>();
         let mut d2 = _mm512_setzero_pd();
         for (c, centre_c) in centre.iter().enumerate() {
             // SAFETY: every index is below `positions.len()` (checked above), so each offset
             // j D + c lies within the positions' D len() values.
-            let x = unsafe { _mm512_i64gather_pd::<8>(offset, base.add(c)) };
+            let at = |k: usize| unsafe { *base.add(idx[k] as usize * D + c) };
+            let x = _mm512_set_pd(at(7), at(6), at(5), at(4), at(3), at(2), at(1), at(0));
             let r = _mm512_sub_pd(x, *centre_c);
             let rr = _mm512_mul_pd(r, r);
             d2 = if c == 0 { rr } else { _mm512_add_pd(d2, rr) };
