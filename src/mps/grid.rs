@@ -991,6 +991,19 @@ mod wide {
         d2
     }
 
+    /// The indices of `j` that `keep` selects, in order, at `out[0..]`; all eight lanes are
+    /// written, those past the kept ones with zeros. Compressed in a register and stored
+    /// whole: a compress straight to memory (`vpcompressd m256`) is microcoded on AMD Zen 4.
+    ///
+    /// # Safety
+    /// The CPU must have AVX-512 F and VL, and `out` must be valid for eight writes.
+    #[inline]
+    #[target_feature(enable = "avx512f,avx512vl")]
+    unsafe fn store_kept(out: *mut u32, keep: __mmask8, j: __m256i) {
+        // SAFETY: the caller's promise.
+        unsafe { _mm256_storeu_si256(out.cast(), _mm256_maskz_compress_epi32(keep, j)) };
+    }
+
     /// x_i per component, for [`squared_distances`].
     ///
     /// # Safety
@@ -1032,20 +1045,12 @@ mod wide {
             let apart = _mm512_cmp_pd_mask::<_CMP_GT_OQ>(d2, zero);
             let keep_outer = apart & _mm512_cmp_pd_mask::<_CMP_LT_OQ>(d2, outer2_v);
             let keep_inner = apart & _mm512_cmp_pd_mask::<_CMP_LT_OQ>(d2, inner2_v);
-            // The kept indices are compressed in a register and all eight lanes stored: a
-            // compress straight to memory is microcoded on AMD Zen 4 (tens of cycles), and the
-            // lanes past the kept ones are overwritten by the next block or never read.
+            // The lanes past the kept ones are overwritten by the next block or never read.
             // SAFETY: `o` and `n_in` are at most `b * 8`, so each eight-lane store ends within
             // the first `row.len()` of `outer` and `inner`.
             unsafe {
-                _mm256_storeu_si256(
-                    outer.as_mut_ptr().add(o).cast(),
-                    _mm256_maskz_compress_epi32(keep_outer, j),
-                );
-                _mm256_storeu_si256(
-                    inner.as_mut_ptr().add(n_in).cast(),
-                    _mm256_maskz_compress_epi32(keep_inner, j),
-                );
+                store_kept(outer.as_mut_ptr().add(o), keep_outer, j);
+                store_kept(inner.as_mut_ptr().add(n_in), keep_inner, j);
             }
             o += keep_outer.count_ones() as usize;
             n_in += keep_inner.count_ones() as usize;
@@ -1086,14 +1091,8 @@ mod wide {
             let keep =
                 _mm512_cmp_pd_mask::<_CMP_LT_OQ>(d2, cutoff2_v) & _mm256_cmpneq_epu32_mask(j, own);
             if keep != 0 {
-                // Compressed in a register, not to memory (see `cut_plain_row`).
                 // SAFETY: eight lanes into eight.
-                unsafe {
-                    _mm256_storeu_si256(
-                        kept.as_mut_ptr().cast(),
-                        _mm256_maskz_compress_epi32(keep, j),
-                    )
-                };
+                unsafe { store_kept(kept.as_mut_ptr(), keep, j) };
                 kept[..keep.count_ones() as usize]
                     .iter()
                     .for_each(|&j| found(j));

@@ -1583,20 +1583,22 @@ fn the_2d_quiet_set_takes_the_acoustic_step_bound_from_revision_4() {
 fn the_3d_quiet_yield_set_takes_the_increments_regularisation_from_revision_5() {
     use mps_runner::manifest::PRESET_REVISION;
     const { assert!(PRESET_REVISION >= 5) };
-    let slump = quiet_slump_as_of;
-    let now = slump(&[], 5).manifest.mps;
+    let now = quiet_slump_as_of(&[], 5).manifest.mps;
     assert_eq!(now.increment_regularisation, 5.0);
     assert_eq!(now.regularisation_radius, 1.45);
-    let before = slump(&[], 4).manifest.mps;
+    let before = quiet_slump_as_of(&[], 4).manifest.mps;
     assert_eq!(before.increment_regularisation, 0.0);
     assert_eq!(before.regularisation_radius, 1.5);
     assert_eq!(
-        slump(&[], 5).hash_hex,
-        slump(&QUIET_3D_YIELD_REVISION_5, 4).hash_hex
+        quiet_slump_as_of(&[], 5).hash_hex,
+        quiet_slump_as_of(&QUIET_3D_YIELD_REVISION_5, 4).hash_hex
     );
-    assert_ne!(slump(&[], 5).hash_hex, slump(&[], 4).hash_hex);
+    assert_ne!(
+        quiet_slump_as_of(&[], 5).hash_hex,
+        quiet_slump_as_of(&[], 4).hash_hex
+    );
     assert_eq!(
-        slump(&["mps.increment_regularisation=2"], 5)
+        quiet_slump_as_of(&["mps.increment_regularisation=2"], 5)
             .manifest
             .mps
             .increment_regularisation,
@@ -1633,21 +1635,25 @@ fn the_3d_quiet_yield_set_takes_the_increments_regularisation_from_revision_5() 
 fn the_3d_quiet_yield_set_takes_local_penalties_and_anderson_from_revision_6() {
     use mps_runner::manifest::PRESET_REVISION;
     const { assert!(PRESET_REVISION >= 6) };
-    let slump = quiet_slump_as_of;
-    let now = slump(&[], 6).manifest.mps;
+    let now = quiet_slump_as_of(&[], 6).manifest.mps;
     assert!(now.yield_penalty_local);
     assert_eq!(now.yield_anderson_depth, 5);
     assert_eq!(now.yield_max_iterations, 200);
-    let before = slump(&[], 5).manifest.mps;
+    let before = quiet_slump_as_of(&[], 5).manifest.mps;
     assert!(!before.yield_penalty_local);
     assert_eq!(before.yield_anderson_depth, 0);
     assert_eq!(before.yield_max_iterations, 50);
     assert_eq!(
-        slump(&[], 6).hash_hex,
-        slump(&QUIET_3D_YIELD_REVISION_6, 5).hash_hex
+        quiet_slump_as_of(&[], 6).hash_hex,
+        quiet_slump_as_of(&QUIET_3D_YIELD_REVISION_6, 5).hash_hex
     );
-    assert_ne!(slump(&[], 6).hash_hex, slump(&[], 5).hash_hex);
-    let own = slump(&["mps.yield_anderson_depth=2"], 6).manifest.mps;
+    assert_ne!(
+        quiet_slump_as_of(&[], 6).hash_hex,
+        quiet_slump_as_of(&[], 5).hash_hex
+    );
+    let own = quiet_slump_as_of(&["mps.yield_anderson_depth=2"], 6)
+        .manifest
+        .mps;
     assert_eq!(own.yield_anderson_depth, 2);
     assert!(own.yield_penalty_local);
     let standard = load_exp("slump_3d.yaml", &["mps.preset=standard"])
