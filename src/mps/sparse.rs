@@ -13,7 +13,7 @@ pub(crate) const ROWS_SIDE_BY_SIDE: usize = 4;
 /// stage with mirror symmetry planes): the columns carry the mirror images' plane bits
 /// ([`Neighbours::plane_bits`]), component m's entry is the value negated where the image
 /// negates component m ([`Neighbours::component_sign`]), and its diagonal is
-/// `component_diagonal[i][m]` (`diagonal` is then unused).
+/// `component_diagonal[i][m]` (`diagonal` then equals it in the rows `image_free` marks).
 #[derive(Debug, Clone, Default)]
 pub struct CsrMatrix {
     pub diagonal: Vec<f64>,
@@ -21,6 +21,11 @@ pub struct CsrMatrix {
     pub columns: Vec<u32>,
     pub values: Vec<f64>,
     pub component_diagonal: Vec<[f64; 3]>,
+    /// With `component_diagonal`: per row, whether it holds no mirror image (no plane bits in
+    /// its columns, every component's diagonal the plain one). Such a row's product is the
+    /// plain product bit for bit (a sign of +1 multiplies exactly), so it skips the per-entry
+    /// mask and sign: most rows of a quarter or half domain are far from its planes.
+    pub image_free: Vec<bool>,
 }
 
 impl CsrMatrix {
@@ -65,6 +70,7 @@ impl CsrMatrix {
             columns: vec![0; entries],
             values: vec![0.0; entries],
             component_diagonal: Vec::new(),
+            image_free: Vec::new(),
         };
         // Each chunk's entries into its own slice of the matrix, in parallel.
         let mut targets = Vec::with_capacity(chunks.len());
@@ -107,6 +113,17 @@ impl CsrMatrix {
             .map(|k| {
                 let own = own_image(k);
                 std::array::from_fn(|m| self.diagonal[k] + own[m])
+            })
+            .collect();
+        self.image_free = (0..self.rows())
+            .map(|k| {
+                let range = self.row_offsets[k]..self.row_offsets[k + 1];
+                self.columns[range]
+                    .iter()
+                    .all(|&c| Neighbours::plane_bits(c) == 0)
+                    && self.component_diagonal[k]
+                        .iter()
+                        .all(|d| d.to_bits() == self.diagonal[k].to_bits())
             })
             .collect();
         self
@@ -172,7 +189,9 @@ impl CsrMatrix {
         first: usize,
         x: &[[f64; M]],
     ) -> [[f64; M]; R] {
-        if self.component_diagonal.is_empty() {
+        if self.component_diagonal.is_empty()
+            || self.image_free[first..first + R].iter().all(|&f| f)
+        {
             self.rows_product_by::<M, R, false>(first, x)
         } else {
             self.rows_product_by::<M, R, true>(first, x)
@@ -280,7 +299,7 @@ impl CsrMatrix {
     #[inline]
     pub(crate) fn row_product<const M: usize>(&self, i: usize, x: &[[f64; M]]) -> [f64; M] {
         let range = self.row_offsets[i]..self.row_offsets[i + 1];
-        if !self.component_diagonal.is_empty() {
+        if !self.component_diagonal.is_empty() && !self.image_free[i] {
             let mut s: [f64; M] = std::array::from_fn(|m| self.component_diagonal[i][m] * x[i][m]);
             for (&c, &v) in self.columns[range.clone()].iter().zip(&self.values[range]) {
                 let xc = &x[entry_index(c)];
@@ -311,16 +330,18 @@ mod tests {
     use crate::rng::SplitMix64;
 
     /// A random matrix of `n` rows of 0 to 40 entries (values of mixed signs and magnitudes,
-    /// so that the order of the additions shows in the last bits); with `planes`, columns
-    /// carry random plane bits and each component its own diagonal.
+    /// so that the order of the additions shows in the last bits); with `planes`, the columns
+    /// of rows k with k % 12 < 6 carry random plane bits, and those with k % 12 < 3 their own
+    /// diagonal per component: groups of four rows with images, mixed and free of them.
     fn random_matrix(rng: &mut SplitMix64, n: usize, planes: bool) -> CsrMatrix {
         type Row = (Vec<u32>, Vec<f64>, f64);
+        let imaged = |k: usize| planes && k % 12 < 6;
         let rows: Vec<Row> = (0..n)
-            .map(|_| {
+            .map(|k| {
                 let len = (rng.unit() * 41.0) as usize;
                 let (mut columns, mut values) = (Vec::new(), Vec::new());
                 for _ in 0..len {
-                    let bits = if planes {
+                    let bits = if imaged(k) {
                         ((rng.unit() * 8.0) as u32) << 29
                     } else {
                         0
@@ -339,7 +360,15 @@ mod tests {
             (rows[k].2, ())
         });
         if planes {
-            m.with_component_diagonals(|k| [k as f64 * 0.1, -0.3, 0.7])
+            m.with_component_diagonals(|k| {
+                // Half of the rows with images keep the plain diagonal: their columns' bits
+                // alone must keep them off the plain product.
+                if imaged(k) && k % 12 < 3 {
+                    [k as f64 * 0.1, -0.3, 0.7]
+                } else {
+                    [0.0; 3]
+                }
+            })
         } else {
             m
         }
@@ -351,10 +380,26 @@ mod tests {
             let mut rng = SplitMix64::new(7 + u64::from(planes));
             let n = 203; // not a multiple of the group: the remainder's rows too
             let a = random_matrix(&mut rng, n, planes);
+            if planes {
+                // Both kinds of rows, so that both products are checked.
+                assert!(a.image_free.iter().any(|&f| f) && a.image_free.iter().any(|&f| !f));
+            }
             let x: Vec<[f64; 3]> = (0..n)
                 .map(|_| std::array::from_fn(|_| rng.unit() * 2.0 - 1.0))
                 .collect();
             let one_by_one: Vec<[f64; 3]> = (0..n).map(|i| a.row_product(i, &x)).collect();
+            // Every row, image-free or not, as the signed formula gives it term by term.
+            for (i, row) in one_by_one.iter().enumerate() {
+                let range = a.row_offsets[i]..a.row_offsets[i + 1];
+                for (m, &got) in row.iter().enumerate() {
+                    let mut s = a.diagonal_of(i, m) * x[i][m];
+                    for k in range.clone() {
+                        let c = a.columns[k];
+                        s += a.values[k] * Neighbours::component_sign(c, m) * x[entry_index(c)][m];
+                    }
+                    assert_eq!(got.to_bits(), s.to_bits(), "row {i}, component {m}");
+                }
+            }
             let mut side_by_side = vec![[0.0; 3]; n];
             a.multiply(&x, &mut side_by_side);
             for i in 0..n {
