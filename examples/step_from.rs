@@ -11,8 +11,10 @@
 //! `--at` takes the last checkpoint at or before T_S; each KEY=VALUE is a `--set` applied on
 //! top of the file's own overrides (so `mps.surface_depth=0`). `--every` prints a row each
 //! S seconds of simulated time (default 0.1): the mean and largest kinetic energy of the
-//! fluid over the interval, the largest speed and the non-flowing share at its end, and the
-//! test's metric NAME there (e.g. `filling_distance_m`; the names of the summary's metrics).
+//! fluid over the interval, the largest speed and the non-flowing share at its end, the
+//! test's metric NAME there (e.g. `filling_distance_m`; the names of the summary's metrics),
+//! and with a yield solve its iterations a step (`yield_it` mean/largest: a solve at its cap,
+//! `mps.yield_max_iterations`, every step has not converged).
 //! `--stage-momentum BAND_M --area A_M2` also sums what each stage of the step does to the
 //! fluid's momentum along x in bands of height BAND_M ([`mps_runner::mps::StageMomentum`]) and
 //! prints, per band, each stage's force on the band and, summed from the top down, the shear
@@ -161,6 +163,9 @@ fn step_on<const D: usize>(
     );
     println!("t_s  mean_ke_j  max_ke_j  max_speed_m_s  non_flowing  steps");
     let (mut sum, mut count, mut max_ke, mut next) = (0.0, 0usize, 0.0f64, start + every_s);
+    // The yield solve's iterations a step over the interval (mean, largest): a solve held at
+    // its cap every step has not converged.
+    let (mut yield_sum, mut yield_max) = (0u64, 0u32);
     // The step as the run took it (clamped to the manifest's end time, not to ours), so that
     // nothing changed means the recorded steps; stop at the first step that reaches `end`. An
     // `end` that is the manifest's own but for the round-off of the checkpoint's time (a run
@@ -176,10 +181,15 @@ fn step_on<const D: usize>(
         if let Some(w) = plan.watch {
             watch(&solver, w, m.spacing_m);
         }
-        if let Err(e) = stepped {
-            println!("# step failed at t = {}: {e:?}", solver.time_s);
-            return;
-        }
+        let report = match stepped {
+            Ok(report) => report,
+            Err(e) => {
+                println!("# step failed at t = {}: {e:?}", solver.time_s);
+                return;
+            }
+        };
+        yield_sum += u64::from(report.yield_iterations);
+        yield_max = yield_max.max(report.yield_iterations);
         let ke = kinetic(&solver);
         sum += ke;
         count += 1;
@@ -203,8 +213,16 @@ fn step_on<const D: usize>(
                 }
             });
             let excess = pressure_excess(&solver, &fluid, m);
+            let yield_iterations = if yield_max > 0 {
+                format!(
+                    "  yield_it {:.1}/{yield_max}",
+                    yield_sum as f64 / count as f64
+                )
+            } else {
+                String::new()
+            };
             println!(
-                "{:.3}  {:.3e}  {:.3e}  {:.3e}  {:.3}  {}  com_z {com_m:.6}{}{excess}",
+                "{:.3}  {:.3e}  {:.3e}  {:.3e}  {:.3}  {}  com_z {com_m:.6}{}{excess}{yield_iterations}",
                 solver.time_s,
                 sum / count as f64,
                 max_ke,
@@ -214,6 +232,7 @@ fn step_on<const D: usize>(
                 shown
             );
             (sum, count, max_ke) = (0.0, 0, 0.0);
+            (yield_sum, yield_max) = (0, 0);
             next += every_s;
         }
     }
