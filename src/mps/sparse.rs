@@ -189,8 +189,13 @@ impl CsrMatrix {
         first: usize,
         x: &[[f64; M]],
     ) -> [[f64; M]; R] {
+        // A matrix given component diagonals by hand, without `image_free`, takes the signed
+        // product throughout.
         if self.component_diagonal.is_empty()
-            || self.image_free[first..first + R].iter().all(|&f| f)
+            || self
+                .image_free
+                .get(first..first + R)
+                .is_some_and(|rows| rows.iter().all(|&f| f))
         {
             self.rows_product_by::<M, R, false>(first, x)
         } else {
@@ -299,7 +304,7 @@ impl CsrMatrix {
     #[inline]
     pub(crate) fn row_product<const M: usize>(&self, i: usize, x: &[[f64; M]]) -> [f64; M] {
         let range = self.row_offsets[i]..self.row_offsets[i + 1];
-        if !self.component_diagonal.is_empty() && !self.image_free[i] {
+        if !self.component_diagonal.is_empty() && !self.image_free.get(i).is_some_and(|&f| f) {
             let mut s: [f64; M] = std::array::from_fn(|m| self.component_diagonal[i][m] * x[i][m]);
             for (&c, &v) in self.columns[range.clone()].iter().zip(&self.values[range]) {
                 let xc = &x[entry_index(c)];
