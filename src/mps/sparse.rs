@@ -180,8 +180,9 @@ impl CsrMatrix {
         s
     }
 
-    /// Rows first..first + R of A x, for M vectors, side by side: each row sums its entries
-    /// in its own order, as [`CsrMatrix::row_product`] does, so the bits are the same. One
+    /// Rows first..first + R of A x, for M vectors, side by side: each row sums its diagonal
+    /// term, then its entries in their stored order, so the bits do not depend on R
+    /// ([`CsrMatrix::row_product`] is R = 1). One
     /// row is a chain of dependent additions that waits on each; R chains overlap.
     #[inline]
     pub(crate) fn rows_product<const M: usize, const R: usize>(
@@ -268,7 +269,7 @@ impl CsrMatrix {
                 d * x[i][m]
             })
         });
-        // One entry of row k, as `row_product` adds it.
+        // One entry of row k.
         let add = |s: &mut [f64; M], c: u32, v: f64| {
             if COMPONENTS {
                 let xc = &x[entry_index(c)];
@@ -300,32 +301,11 @@ impl CsrMatrix {
         s
     }
 
-    /// Row i of A x, for M vectors.
+    /// Row i of A x, for M vectors: the side-by-side product of one row (the same dispatch
+    /// between the signed and the plain product, the same order of terms).
     #[inline]
     pub(crate) fn row_product<const M: usize>(&self, i: usize, x: &[[f64; M]]) -> [f64; M] {
-        let range = self.row_offsets[i]..self.row_offsets[i + 1];
-        if !self.component_diagonal.is_empty() && !self.image_free.get(i).is_some_and(|&f| f) {
-            let mut s: [f64; M] = std::array::from_fn(|m| self.component_diagonal[i][m] * x[i][m]);
-            for (&c, &v) in self.columns[range.clone()].iter().zip(&self.values[range]) {
-                let xc = &x[entry_index(c)];
-                for m in 0..M {
-                    s[m] += v * Neighbours::component_sign(c, m) * xc[m];
-                }
-            }
-            return s;
-        }
-        let mut s = [0.0; M];
-        for m in 0..M {
-            s[m] = self.diagonal[i] * x[i][m];
-        }
-        // Zipped slices: no bounds check per entry but the column lookup.
-        for (&c, &v) in self.columns[range.clone()].iter().zip(&self.values[range]) {
-            let xc = &x[c as usize];
-            for m in 0..M {
-                s[m] += v * xc[m];
-            }
-        }
-        s
+        self.rows_product::<M, 1>(i, x)[0]
     }
 }
 
