@@ -6,9 +6,11 @@
 //! tau_y where the fluid yields in simple shear), each row's disorder (the spread of its
 //! heights in spacings, the rms of its velocity about the row's mean, the rms of its carried
 //! pressure about the row's mean: a particle-to-particle pattern), and the layer's top
-//! (largest height, 99th percentile). Where a disordered layer (`scene.disorder`) moves
+//! (largest height, 99th percentile; over h - l0/2 the layer's depth). Where a disordered layer (`scene.disorder`) moves
 //! faster or slower than U, this says which of the floor, the viscous term, the yield term
 //! or a swollen layer it is (docs/validation.md, "A disordered layer on an incline").
+//! With a slipping floor (`scene.floor_slip_length_m`, 3D) the side walls hold the layer and
+//! the rows are bins of the distance from the nearer side wall instead of heights.
 //!
 //! Usage: cargo run --release --example layer_profile -- FILE.mcap [--at T_S]
 use mps_runner::experiment::SceneSpec;
@@ -47,7 +49,27 @@ fn main() {
     let SceneSpec::InclinedLayer(layer) = &m.scene else {
         panic!("not an inclined layer")
     };
-    let h = (layer.layer_depth_m / l0).round() * l0;
+    // The axis across which the layer shears, and the distance from its wall: the height
+    // above the floor, or with a slipping floor the distance from the nearer side wall.
+    let width_m = (layer.width_m.unwrap_or(0.0) / l0).round() * l0;
+    let across = if layer.floor_slip_length_m.is_some() {
+        1
+    } else {
+        d - 1
+    };
+    let from_wall = |x: &[f64]| {
+        if across == d - 1 {
+            x[across]
+        } else {
+            x[across].min(width_m - x[across])
+        }
+    };
+    let depth_m = (layer.layer_depth_m / l0).round() * l0;
+    let h = if across == d - 1 {
+        depth_m
+    } else {
+        0.5 * width_m
+    };
     let (_, hc, plug) = layer.closed_form_speed_m_s(m, 0.0);
     let closed = |y: f64| layer.closed_form_speed_m_s(m, y).0;
     // The viscous Laplacian's response to u = y^2 / 2 (exact: 1) on this arrangement:
@@ -81,7 +103,7 @@ fn main() {
             for a in 1..d {
                 r2 += (xj[a] - xi[a]) * (xj[a] - xi[a]);
             }
-            let dy = xj[d - 1] - xi[d - 1];
+            let dy = from_wall(xj) - from_wall(xi);
             sum += mps_runner::mps::kernel::weight(r2.sqrt(), radius_m) * dy * dy;
         }
         d as f64 * sum / (refs.lambda_m2 * refs.n0_lap)
@@ -110,8 +132,8 @@ fn main() {
         if kind != 0 {
             continue;
         }
-        let y = state.position_m[i * d + d - 1];
-        heights.push(y);
+        let y = from_wall(&state.position_m[i * d..i * d + d]);
+        heights.push(state.position_m[i * d + d - 1]);
         let row = ((y / l0).floor().max(0.0) as usize).min(rows - 1);
         sum[row] += state.velocity_m_s[i * d];
         ysum[row] += y;
@@ -128,7 +150,13 @@ fn main() {
         lap[row] += response(i);
         if stress.len() == count_all * d * d {
             let t = &stress[i * d * d..(i + 1) * d * d];
-            shear[row] += t[d - 1];
+            // Across the channel the two side walls shear the layer in opposite senses.
+            let sense = if across != d - 1 && state.position_m[i * d + across] > 0.5 * width_m {
+                -1.0
+            } else {
+                1.0
+            };
+            shear[row] += sense * t[across];
             size[row] += t.iter().map(|v| v * v).sum::<f64>().sqrt() / std::f64::consts::SQRT_2;
         }
         count[row] += 1;
@@ -137,11 +165,11 @@ fn main() {
     let top = heights.last().copied().unwrap_or(0.0);
     let p99 = heights[(0.99 * (heights.len() - 1) as f64) as usize];
     println!(
-        "# t = {:.3} s; h = {h} m, h_c = {hc:.4} m, U = {:.2} mm/s; top {:.4} m (+{:.2} l0 over h - l0/2), 99th percentile {:.4} m",
+        "# t = {:.3} s; h (or W/2) = {h} m, h_c = {hc:.4} m, U = {:.2} mm/s; top {:.4} m (+{:.2} l0 over h - l0/2), 99th percentile {:.4} m",
         state.time_s,
         1e3 * plug,
         top,
-        (top - (h - 0.5 * l0)) / l0,
+        (top - (depth_m - 0.5 * l0)) / l0,
         p99
     );
     println!(

@@ -8,6 +8,11 @@
 //! In 3D the layer is a channel of width `width_m` between side walls (the neighbour grid has
 //! one periodic axis), no-slip or slipping (`side_slip_length_m`; free slip stands for a layer
 //! of unbounded width), and the plug speed is taken over the middle third of the width.
+//! With a slipping floor (`floor_slip_length_m`, 3D) the side walls alone hold the layer: the
+//! shear runs across the channel, and the same closed form holds with h replaced by the
+//! half-width W/2 (plane Poiseuille flow of a Bingham fluid between the side walls): rigid
+//! for W/2 <= h_c, else a middle plug at U = rho g sin(theta) (W/2 - h_c)^2 / (2 mu_p). It
+//! checks the side walls' grip, which holds a heap in an L-box.
 use super::geometry::lattice::{cells, centre, for_each_index};
 use super::{Experiment, Manifest, Scene, check_3d_only, slipping_walls, yield_stress_pa};
 use crate::manifest::validate::{Checker, NON_NEGATIVE, POSITIVE, between, fmt_num};
@@ -37,6 +42,9 @@ pub struct InclinedLayer {
     /// Navier slip length of the side walls, in metres (3D; large: free slip, so that the
     /// channel stands for a layer of unbounded width). Absent: no slip.
     pub side_slip_length_m: Option<f64>,
+    /// Navier slip length of the floor, in metres (3D; large: free slip, so that only the side
+    /// walls hold the layer, which needs `side_slip_length_m` absent). Absent: no slip.
+    pub floor_slip_length_m: Option<f64>,
     /// The layer's particles start displaced from the lattice by up to this fraction of the
     /// spacing in each coordinate (uniform, from `disorder_seed`): a disordered layer such as
     /// a flow leaves behind. Absent: the lattice.
@@ -53,6 +61,7 @@ impl Default for InclinedLayer {
             incline_deg: 5.0,
             width_m: None,
             side_slip_length_m: None,
+            floor_slip_length_m: None,
             disorder: None,
             disorder_seed: None,
         }
@@ -70,6 +79,15 @@ impl InclinedLayer {
     /// The channel's width on the lattice (3D).
     fn width(&self, spacing_m: f64) -> f64 {
         cells(self.width_m.unwrap_or(0.0), spacing_m) as f64 * spacing_m
+    }
+    /// The distance over which the wall stress builds up from the plug's edge: the depth on
+    /// the lattice, or with a slipping floor the half-width (the shear runs across).
+    fn sheared_extent_m(&self, spacing_m: f64) -> f64 {
+        if self.floor_slip_length_m.is_some() {
+            0.5 * self.width(spacing_m)
+        } else {
+            self.depth_m(spacing_m)
+        }
     }
     fn period(&self, spacing_m: f64) -> PeriodicX {
         PeriodicX {
@@ -99,7 +117,7 @@ fn closed_form(layer: &InclinedLayer, m: &Manifest) -> (f64, f64, f64) {
     let driving = m.fluid.density_kg_m3() * m.gravity_m_s2 * libm::sin(layer.incline_rad());
     let viscosity = plastic_viscosity_pa_s(&m.fluid);
     let critical_m = yield_stress_pa(&m.fluid) / driving;
-    let sheared_m = (layer.depth_m(m.spacing_m) - critical_m).max(0.0);
+    let sheared_m = (layer.sheared_extent_m(m.spacing_m) - critical_m).max(0.0);
     (
         driving,
         critical_m,
@@ -110,10 +128,11 @@ fn closed_form(layer: &InclinedLayer, m: &Manifest) -> (f64, f64, f64) {
 impl InclinedLayer {
     /// The closed form's along-slope speed at `y_m` above the floor: the sheared zone's
     /// (rho g sin theta / mu_p) ((h - h_c) y - y^2 / 2) below h - h_c, the plug's U above.
-    /// With the layer's depth on the lattice (whole rows) and its h_c and U.
+    /// With the layer's depth on the lattice (whole rows) and its h_c and U. With a slipping
+    /// floor, `y_m` is the distance from the nearer side wall.
     pub fn closed_form_speed_m_s(&self, m: &Manifest, y_m: f64) -> (f64, f64, f64) {
         let (driving, critical_m, plug_m_s) = closed_form(self, m);
-        let sheared_m = (self.depth_m(m.spacing_m) - critical_m).max(0.0);
+        let sheared_m = (self.sheared_extent_m(m.spacing_m) - critical_m).max(0.0);
         let y = y_m.clamp(0.0, sheared_m);
         let speed = driving / plastic_viscosity_pa_s(&m.fluid) * (sheared_m * y - 0.5 * y * y);
         (speed, critical_m, plug_m_s)
@@ -139,6 +158,23 @@ impl Experiment for InclinedLayer {
             NON_NEGATIVE,
             "a 2D layer has no side walls",
         );
+        let floor_ok = check_3d_only(
+            m,
+            c,
+            "scene.floor_slip_length_m",
+            self.floor_slip_length_m,
+            NON_NEGATIVE,
+            "a 2D layer on a slipping floor has nothing to hold it",
+        );
+        let held_ok = if self.floor_slip_length_m.is_some() && self.side_slip_length_m.is_some() {
+            c.fail(
+                "scene.floor_slip_length_m",
+                "needs side walls that grip (scene.side_slip_length_m absent): with the floor and the side walls slipping nothing holds the layer".into(),
+            );
+            false
+        } else {
+            true
+        };
         if let Some(disorder) = self.disorder {
             // A quarter spacing keeps every particle 0.75 l0 from the floor's wall row and its
             // neighbours apart by more than the collision distance's half spacing.
@@ -151,7 +187,7 @@ impl Experiment for InclinedLayer {
             self.incline_deg,
             between(0.0, false, 90.0, false),
         );
-        if !(depth_ok && period_ok && width_ok && slip_ok && super::spacing_ok(m)) {
+        if !(depth_ok && period_ok && width_ok && slip_ok && floor_ok && held_ok && super::spacing_ok(m)) {
             return;
         }
         let mut lengths = vec![
@@ -213,6 +249,7 @@ impl Experiment for InclinedLayer {
         }
         lo[D - 1] = -layers;
         hi[D - 1] = 0;
+        let floor_first = particles.len();
         for_each_index(lo, hi, |idx| {
             let kind = if idx[D - 1] >= -walls {
                 ParticleKind::Wall
@@ -222,6 +259,9 @@ impl Experiment for InclinedLayer {
             particles.push(centre(idx, l0), kind)
         });
         let mut bodies = Vec::new();
+        if let (3, Some(slip_length_m)) = (D, self.floor_slip_length_m) {
+            bodies.push(slipping_walls(floor_first, particles.len(), slip_length_m));
+        }
         if D == 3 {
             let first = particles.len();
             // The side walls: wall rows next to the fluid, dummies behind, from the floor to

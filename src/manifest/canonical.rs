@@ -192,6 +192,7 @@ pub fn canonical_text<S: SceneSection>(manifest: &Manifest<S>) -> String {
         ("scene", "cone_slip_length_m"),
         ("scene", "width_m"),
         ("scene", "side_slip_length_m"),
+        ("scene", "floor_slip_length_m"),
         ("scene", "disorder"),
         ("scene", "disorder_seed"),
     ] {

@@ -749,7 +749,12 @@ fn row_weights<const D: usize>(
     largest_pa_s: f64,
 ) -> Vec<f64> {
     map_particles(e.len(), |k| {
-        let secant = mu + limit / (e[k] + constant[k]).norm();
+        // Without a yield stress the law is Newtonian (limit / |e| is 0/0 at rest).
+        let secant = if limit > 0.0 {
+            mu + limit / (e[k] + constant[k]).norm()
+        } else {
+            mu
+        };
         (secant / largest_pa_s).clamp(MIN_PENALTY_FRACTION, 1.0)
     })
 }
@@ -858,6 +863,10 @@ mod tests {
         let fast = [shear * 1e12];
         let w = row_weights::<2>(&fast, &[rigid], 1e-9, limit, cap);
         assert_eq!(w[0], MIN_PENALTY_FRACTION);
+        // No yield stress (a Bingham fluid of 0 Pa, Newtonian): the plastic viscosity, at
+        // rest too (limit / |e| would be 0/0).
+        let w = row_weights::<2>(&[rigid, shear], &[rigid, rigid], mu, 0.0, cap);
+        assert_eq!(w, vec![mu / cap, mu / cap]);
     }
 
     /// The law's step with the volumetric part on its own limit: a stress whose deviatoric

@@ -297,6 +297,19 @@ fn a_3d_layer_without_a_width_a_2d_width_or_a_short_period_is_refused_naming_the
             vec!["scene.disorder=0.3"],
             "scene.disorder: must be in [0, 0.25]",
         ),
+        (
+            vec!["scene.floor_slip_length_m=1000"],
+            "scene.floor_slip_length_m: is for dimension 3 only",
+        ),
+        (
+            vec![
+                "dimension=3",
+                "scene.width_m=0.12",
+                "scene.side_slip_length_m=1000",
+                "scene.floor_slip_length_m=1000",
+            ],
+            "scene.floor_slip_length_m: needs side walls that grip",
+        ),
     ] {
         common::assert_refused("inclined_layer.yaml", &sets, field);
     }
@@ -345,6 +358,59 @@ fn a_3d_layer_between_slipping_side_walls_holds_below_h_c_and_slides_at_u_above(
     assert!(
         (mean / closed - 1.0).abs() < 0.05,
         "mean plug {mean} m/s, closed form {closed} m/s"
+    );
+}
+
+/// The side walls alone (`scene.floor_slip_length_m`: the floor slips freely): a 3D channel of
+/// width W held by its no-slip side walls, the closed form with h replaced by W/2, under the
+/// quiet preset (the yield solve), 10 mm, 100 Pa, mu_p 50 Pa s, a layer 4 rows deep:
+/// W = 0.1 m (0.98 of the critical width 2 h_c = 101.7 mm) holds (measured 2.2e-8 m/s, every
+/// particle non-flowing, over 1.5 s; 0.09 m too); W = 0.2 m (1.97 times it) slides with a
+/// middle plug at 1.04-1.09 U (47.50 mm/s) once steady, where a layer held by its floor over
+/// the same sheared extent runs at 0.98 U: the viscous Laplacian, normalised by the full
+/// stencil, loses the share of a shear along the free surface that the cut stencil misses
+/// (a Newtonian channel here: +16 %; docs/validation.md, "Side walls alone").
+#[test]
+fn side_walls_alone_hold_a_3d_channel_below_its_critical_width_and_release_a_wider_one() {
+    let run = |width: &str| {
+        let width = format!("scene.width_m={width}");
+        let resolved = common::resolve(
+            "inclined_layer.yaml",
+            &[
+                "dimension=3",
+                "spacing_m=0.01",
+                "scene.period_m=0.12",
+                "scene.layer_depth_m=0.04",
+                "scene.floor_slip_length_m=1000",
+                &width,
+                "mps.preset=quiet",
+                "time.end_s=1",
+            ],
+        );
+        assert_eq!(resolved.manifest.mps.yield_penalty_pa_s, 1000.0);
+        let dir = tempfile::tempdir().unwrap();
+        (common::run_completed(&resolved, dir.path(), 2), dir)
+    };
+    let h_c = 100.0 / driving_pa_m();
+    let (rigid, _dir) = run("0.1");
+    assert!(0.1 < 2.0 * h_c && 0.1 > 0.95 * 2.0 * h_c);
+    let speed = rigid.summary.metrics["fluid_max_speed_m_s"];
+    assert!(speed < 1e-4, "max speed {speed} m/s at W = 0.98 (2 h_c)");
+    assert_eq!(rigid.summary.metrics["non_flowing_fraction"], 1.0);
+    assert_eq!(rigid.summary.metrics["closed_form_plug_speed_m_s"], 0.0);
+    let (sliding, _dir) = run("0.2");
+    let closed = sliding.summary.metrics["closed_form_plug_speed_m_s"];
+    let expected = driving_pa_m() * (0.1 - h_c) * (0.1 - h_c) / (2.0 * 50.0);
+    assert!(
+        (closed / expected - 1.0).abs() < 1e-12,
+        "{closed} against {expected}"
+    );
+    let rows = plug_speeds_after(&sliding.path, 0.5);
+    assert!(rows.len() >= 45, "{} rows after 0.5 s", rows.len());
+    let mean = mean_of(&rows);
+    assert!(
+        (mean / closed - 1.0).abs() < 0.1,
+        "mean plug {mean} m/s over [0.5, 1] s, closed form {closed} m/s"
     );
 }
 
