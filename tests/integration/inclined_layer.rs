@@ -30,6 +30,47 @@ fn plug_speeds_after(path: &std::path::Path, from_s: f64) -> Vec<f64> {
         .collect()
 }
 
+/// The shipped layer in 3D under the quiet preset (the yield solve; in 3D without the
+/// pressure regularisation), 10 mm, a period of 0.12 m, to 1 s, with `sets` added (a later
+/// setting replaces an earlier one); two threads.
+fn run_quiet_3d(sets: &[&str]) -> (mps_runner::run::RunResult, tempfile::TempDir) {
+    let mut all = vec![
+        "dimension=3",
+        "spacing_m=0.01",
+        "scene.period_m=0.12",
+        "mps.preset=quiet",
+        "time.end_s=1",
+    ];
+    all.extend_from_slice(sets);
+    let resolved = common::resolve("inclined_layer.yaml", &all);
+    assert_eq!(resolved.manifest.mps.yield_penalty_pa_s, 1000.0);
+    assert_eq!(resolved.manifest.mps.pressure_regularisation, 0.0);
+    let dir = tempfile::tempdir().unwrap();
+    (common::run_completed(&resolved, dir.path(), 2), dir)
+}
+
+/// The mean plug speed of the run at `path` over its diagnostics rows from `from_s` on (at
+/// least `min_rows` of them) lies within `tolerance` of `closed` (relative).
+fn assert_mean_plug(
+    path: &std::path::Path,
+    from_s: f64,
+    min_rows: usize,
+    closed: f64,
+    tolerance: f64,
+) {
+    let rows = plug_speeds_after(path, from_s);
+    assert!(
+        rows.len() >= min_rows,
+        "{} rows after {from_s} s",
+        rows.len()
+    );
+    let mean = mean_of(&rows);
+    assert!(
+        (mean / closed - 1.0).abs() < tolerance,
+        "mean plug {mean} m/s from {from_s} s, closed form {closed} m/s"
+    );
+}
+
 /// The shipped manifest with a Newtonian fluid of 50 Pa s (h_c = 0), written to a temporary
 /// folder (kept alive by the returned handle).
 fn newtonian_manifest() -> (tempfile::TempDir, std::path::PathBuf) {
@@ -325,40 +366,25 @@ fn a_3d_layer_without_a_width_a_2d_width_or_a_short_period_is_refused_naming_the
 /// spans the width (docs/validation.md, "A 3D layer on an incline").
 #[test]
 fn a_3d_layer_between_slipping_side_walls_holds_below_h_c_and_slides_at_u_above() {
-    let run = |sets: &[&str]| {
-        let mut all = vec![
-            "dimension=3",
-            "spacing_m=0.01",
-            "scene.period_m=0.12",
+    let run = |depth: &str| {
+        run_quiet_3d(&[
             "scene.width_m=0.12",
             "scene.side_slip_length_m=1000",
             "fluid.yield_stress_pa=42.4",
             "fluid.plastic_viscosity_pa_s=20",
-            "mps.preset=quiet",
-            "time.end_s=1",
-        ];
-        all.extend_from_slice(sets);
-        let resolved = common::resolve("inclined_layer.yaml", &all);
-        assert_eq!(resolved.manifest.mps.yield_penalty_pa_s, 1000.0);
-        let dir = tempfile::tempdir().unwrap();
-        (common::run_completed(&resolved, dir.path(), 2), dir)
+            depth,
+        ])
     };
-    let (rigid, _dir) = run(&["scene.layer_depth_m=0.02"]);
+    let (rigid, _dir) = run("scene.layer_depth_m=0.02");
     let speed = rigid.summary.metrics["fluid_max_speed_m_s"];
     assert!(speed < 1e-4, "max speed {speed} m/s at 0.93 h_c");
     assert_eq!(rigid.summary.metrics["non_flowing_fraction"], 1.0);
-    let (sliding, _dir) = run(&["scene.layer_depth_m=0.04"]);
+    let (sliding, _dir) = run("scene.layer_depth_m=0.04");
     let closed = sliding.summary.metrics["closed_form_plug_speed_m_s"];
     let h_c = 42.4 / driving_pa_m();
     let expected = driving_pa_m() * (0.04 - h_c) * (0.04 - h_c) / (2.0 * 20.0);
     assert!((closed / expected - 1.0).abs() < 1e-12);
-    let rows = plug_speeds_after(&sliding.path, 0.25);
-    assert!(rows.len() >= 70, "{} rows after 0.25 s", rows.len());
-    let mean = mean_of(&rows);
-    assert!(
-        (mean / closed - 1.0).abs() < 0.05,
-        "mean plug {mean} m/s, closed form {closed} m/s"
-    );
+    assert_mean_plug(&sliding.path, 0.25, 70, closed, 0.05);
 }
 
 /// The side walls alone (`scene.floor_slip_length_m`: the floor slips freely): a 3D channel of
@@ -373,45 +399,27 @@ fn a_3d_layer_between_slipping_side_walls_holds_below_h_c_and_slides_at_u_above(
 #[test]
 fn side_walls_alone_hold_a_3d_channel_below_its_critical_width_and_release_a_wider_one() {
     let run = |width: &str| {
-        let width = format!("scene.width_m={width}");
-        let resolved = common::resolve(
-            "inclined_layer.yaml",
-            &[
-                "dimension=3",
-                "spacing_m=0.01",
-                "scene.period_m=0.12",
-                "scene.layer_depth_m=0.04",
-                "scene.floor_slip_length_m=1000",
-                &width,
-                "mps.preset=quiet",
-                "time.end_s=1",
-            ],
-        );
-        assert_eq!(resolved.manifest.mps.yield_penalty_pa_s, 1000.0);
-        let dir = tempfile::tempdir().unwrap();
-        (common::run_completed(&resolved, dir.path(), 2), dir)
+        run_quiet_3d(&[
+            "scene.layer_depth_m=0.04",
+            "scene.floor_slip_length_m=1000",
+            width,
+        ])
     };
     let h_c = 100.0 / driving_pa_m();
-    let (rigid, _dir) = run("0.1");
+    let (rigid, _dir) = run("scene.width_m=0.1");
     assert!(0.1 < 2.0 * h_c && 0.1 > 0.95 * 2.0 * h_c);
     let speed = rigid.summary.metrics["fluid_max_speed_m_s"];
     assert!(speed < 1e-4, "max speed {speed} m/s at W = 0.98 (2 h_c)");
     assert_eq!(rigid.summary.metrics["non_flowing_fraction"], 1.0);
     assert_eq!(rigid.summary.metrics["closed_form_plug_speed_m_s"], 0.0);
-    let (sliding, _dir) = run("0.2");
+    let (sliding, _dir) = run("scene.width_m=0.2");
     let closed = sliding.summary.metrics["closed_form_plug_speed_m_s"];
     let expected = driving_pa_m() * (0.1 - h_c) * (0.1 - h_c) / (2.0 * 50.0);
     assert!(
         (closed / expected - 1.0).abs() < 1e-12,
         "{closed} against {expected}"
     );
-    let rows = plug_speeds_after(&sliding.path, 0.5);
-    assert!(rows.len() >= 45, "{} rows after 0.5 s", rows.len());
-    let mean = mean_of(&rows);
-    assert!(
-        (mean / closed - 1.0).abs() < 0.1,
-        "mean plug {mean} m/s over [0.5, 1] s, closed form {closed} m/s"
-    );
+    assert_mean_plug(&sliding.path, 0.5, 45, closed, 0.1);
 }
 
 /// A deep disordered 3D Bingham layer at rest (7 rows at 20 mm, h_c = 254 m on a plane
@@ -426,9 +434,9 @@ fn side_walls_alone_hold_a_3d_channel_below_its_critical_width_and_release_a_wid
 /// the end.
 #[test]
 fn a_deep_disordered_3d_layer_at_rest_boils_unless_the_increment_is_regularised() {
-    let run = |sets: &[&str]| {
-        let mut all = vec![
-            "dimension=3",
+    let run = |increment: &str| {
+        // The 3D set at 20 mm.
+        let (result, _dir) = run_quiet_3d(&[
             "spacing_m=0.02",
             "scene.period_m=0.22",
             "scene.width_m=0.12",
@@ -436,16 +444,10 @@ fn a_deep_disordered_3d_layer_at_rest_boils_unless_the_increment_is_regularised(
             "scene.layer_depth_m=0.14",
             "scene.incline_deg=0.001",
             "scene.disorder=0.25",
-            "mps.preset=quiet",
             "mps.regularisation_radius=1.45",
             "time.end_s=2",
-        ];
-        all.extend_from_slice(sets);
-        let resolved = common::resolve("inclined_layer.yaml", &all);
-        assert_eq!(resolved.manifest.mps.yield_penalty_pa_s, 1000.0);
-        assert_eq!(resolved.manifest.mps.pressure_regularisation, 0.0);
-        let dir = tempfile::tempdir().unwrap();
-        let result = common::run_completed(&resolved, dir.path(), 2);
+            increment,
+        ]);
         let run = mps_runner::record::read_run(&result.path).unwrap();
         // The last half second: every row's largest speed, and the mean kinetic energy.
         let late: Vec<_> = run.diagnostics.iter().filter(|d| d.time_s >= 1.5).collect();
@@ -461,13 +463,13 @@ fn a_deep_disordered_3d_layer_at_rest_boils_unless_the_increment_is_regularised(
     };
     // The quiet 3D yield set takes the regularisation since the preset's revision 5: left
     // out here by hand.
-    let (speeds, boiling_j, rigid_share) = run(&["mps.increment_regularisation=0"]);
+    let (speeds, boiling_j, rigid_share) = run("mps.increment_regularisation=0");
     assert!(
         speeds[0] > 0.01 && rigid_share < 0.1,
         "without a stabiliser: slowest row {} m/s over [1.5, 2] s, {rigid_share} non-flowing",
         speeds[0]
     );
-    let (speeds, resting_j, rigid_share) = run(&["mps.increment_regularisation=5"]);
+    let (speeds, resting_j, rigid_share) = run("mps.increment_regularisation=5");
     let median = speeds[speeds.len() / 2];
     assert!(
         resting_j < 1e-4 * boiling_j && median < 1e-3 && rigid_share >= 0.99,
