@@ -6,9 +6,10 @@
 //! tau_y where the fluid yields in simple shear), each row's disorder (the spread of its
 //! heights in spacings, the rms of its velocity about the row's mean, the rms of its carried
 //! pressure about the row's mean: a particle-to-particle pattern), and the layer's top
-//! (largest height, 99th percentile; over h - l0/2 the layer's depth). Where a disordered layer (`scene.disorder`) moves
-//! faster or slower than U, this says which of the floor, the viscous term, the yield term
-//! or a swollen layer it is (docs/validation.md, "A disordered layer on an incline").
+//! (largest height, 99th percentile; over h - l0/2 the layer's depth). Where a disordered
+//! layer (`scene.disorder`) moves faster or slower than U, this says which of the floor, the
+//! viscous term, the yield term or a swollen layer it is (docs/validation.md, "A disordered
+//! layer on an incline").
 //! With a slipping floor (`scene.floor_slip_length_m`, 3D) the side walls hold the layer and
 //! the rows are bins of the distance from the nearer side wall instead of heights.
 //!

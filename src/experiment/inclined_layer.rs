@@ -43,7 +43,9 @@ pub struct InclinedLayer {
     /// channel stands for a layer of unbounded width). Absent: no slip.
     pub side_slip_length_m: Option<f64>,
     /// Navier slip length of the floor, in metres (3D; large: free slip, so that only the side
-    /// walls hold the layer, which needs `side_slip_length_m` absent). Absent: no slip.
+    /// walls hold the layer, which needs `side_slip_length_m` absent; the closed form then
+    /// takes the floor as free-slip, for a slip length far above the layer's size). Absent: no
+    /// slip.
     pub floor_slip_length_m: Option<f64>,
     /// The layer's particles start displaced from the lattice by up to this fraction of the
     /// spacing in each coordinate (uniform, from `disorder_seed`): a disordered layer such as
