@@ -53,24 +53,17 @@ fn main() {
     // The axis across which the layer shears, and the distance from its wall: the height
     // above the floor, or with a slipping floor the distance from the nearer side wall.
     let width_m = (layer.width_m.unwrap_or(0.0) / l0).round() * l0;
-    let across = if layer.floor_slip_length_m.is_some() {
-        1
-    } else {
-        d - 1
-    };
+    let side_held = layer.floor_slip_length_m.is_some();
+    let across = if side_held { 1 } else { d - 1 };
     let from_wall = |x: &[f64]| {
-        if across == d - 1 {
-            x[across]
-        } else {
+        if side_held {
             x[across].min(width_m - x[across])
+        } else {
+            x[across]
         }
     };
     let depth_m = (layer.layer_depth_m / l0).round() * l0;
-    let h = if across == d - 1 {
-        depth_m
-    } else {
-        0.5 * width_m
-    };
+    let h = if side_held { 0.5 * width_m } else { depth_m };
     let (_, hc, plug) = layer.closed_form_speed_m_s(m, 0.0);
     let closed = |y: f64| layer.closed_form_speed_m_s(m, y).0;
     // The viscous Laplacian's response to u = y^2 / 2 (exact: 1) on this arrangement:
@@ -152,7 +145,7 @@ fn main() {
         if stress.len() == count_all * d * d {
             let t = &stress[i * d * d..(i + 1) * d * d];
             // Across the channel the two side walls shear the layer in opposite senses.
-            let sense = if across != d - 1 && state.position_m[i * d + across] > 0.5 * width_m {
+            let sense = if side_held && state.position_m[i * d + across] > 0.5 * width_m {
                 -1.0
             } else {
                 1.0
