@@ -16,7 +16,7 @@
 //! scheme), `mps.pressure_floor_pa` at 0, `mps.yield_penalty_pa_s` at 0 (with
 //! `mps.yield_max_iterations` and `mps.yield_tolerance_1_s`), `mps.yield_velocity_fraction` and
 //! `mps.yield_anderson_depth` at 0, `mps.yield_penalty_local`, `mps.corrected_strain_rate`, `mps.wall_surface_no_slip`, `mps.wall_face_normals`, `mps.quadratic_strain_rate`
-//! `mps.exact_projection`, `mps.conservative_gradient` and `mps.adjoint_projection` (also under the standard scheme) false, `stop.rest_*` without
+//! `mps.exact_projection`, `mps.conservative_gradient`, `mps.adjoint_projection` and `mps.periodic_hydrostatic` (also under the standard scheme) false, `stop.rest_*` without
 //! `stop.rest_metric`, null `mps.wall_collision_*`, `mps.strain_rate_radius`,
 //! `mps.viscous_laplacian_radius`, `time.dt_min_s`, `time.acoustic_courant`, `stop.max_ghost_particles` and the rod's,
 //! the cone's and the bodies' slip lengths, the inclined layer's width and the side walls' slip length (inclined layer, tank), an empty `boundaries` section), so every
@@ -171,6 +171,10 @@ pub fn canonical_text<S: SceneSection>(manifest: &Manifest<S>) -> String {
             (
                 "adjoint_projection",
                 manifest.mps.adjoint_projection && incremental,
+            ),
+            (
+                "periodic_hydrostatic",
+                manifest.mps.periodic_hydrostatic && incremental,
             ),
         ] {
             if !on {

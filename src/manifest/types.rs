@@ -381,6 +381,13 @@ pub struct Mps {
     /// Unused by `standard`.
     #[serde(default)]
     pub adjoint_projection: bool,
+    /// Incremental scheme: the hydrostatic pressure that the wall and dummy particles carry
+    /// (p_i + rho g . r_ij) leaves out gravity's component along a periodic axis, along
+    /// which a steady periodic flow's pressure has no gradient (the inclined layer, whose
+    /// shear stress carries that component). Changes nothing without a periodic axis or
+    /// with level gravity. Unused by `standard`.
+    #[serde(default)]
+    pub periodic_hydrostatic: bool,
     /// Penalty r of Bingham's law with a rigid state, in Pa s: the viscous stage minimises
     /// the step's dissipation by an augmented Lagrangian (`src/mps/yield_solve.rs`), so that
     /// material whose stress stays below the yield stress has exactly zero strain rate,
@@ -529,6 +536,7 @@ impl Default for Mps {
             exact_projection: false,
             conservative_gradient: false,
             adjoint_projection: false,
+            periodic_hydrostatic: false,
             ppe_preconditioner: PpePreconditioner::default(),
             multigrid_over_correction: default_multigrid_over_correction(),
             multigrid_single_precision: false,

@@ -388,6 +388,14 @@ pub fn check<S: SceneSection>(m: &Manifest<S>) -> Vec<Issue> {
                 .to_string(),
         );
     }
+    if p.periodic_hydrostatic && p.pressure_scheme == PressureSchemeName::Standard {
+        c.fail(
+            "mps.periodic_hydrostatic",
+            "needs mps.pressure_scheme: incremental (the standard scheme's walls carry no \
+             hydrostatic pressure)"
+                .to_string(),
+        );
+    }
     if p.adjoint_projection && p.pressure_scheme == PressureSchemeName::Standard {
         c.fail(
             "mps.adjoint_projection",

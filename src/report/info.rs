@@ -225,6 +225,7 @@ pub fn run_info(path: &Path, size_bytes: u64, run: &RunFile) -> RunInfo {
                 "exact_projection",
                 "conservative_gradient",
                 "adjoint_projection",
+                "periodic_hydrostatic",
                 "yield_penalty_pa_s",
                 "yield_max_iterations",
                 "yield_tolerance_1_s",

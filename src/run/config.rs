@@ -123,6 +123,7 @@ pub fn solver_config<const D: usize>(m: &Manifest, scene: &Scene<D>) -> SolverCo
         exact_projection: m.mps.exact_projection,
         conservative_gradient: m.mps.conservative_gradient,
         adjoint_projection: m.mps.adjoint_projection,
+        periodic_hydrostatic: m.mps.periodic_hydrostatic,
         compressibility_1_pa: m.mps.compressibility_1_pa,
         collision_distance_m: m.mps.collision_distance * l0,
         wall_collision_distance_m: match m.mps.wall_collision_distance {

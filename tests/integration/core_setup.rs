@@ -80,6 +80,7 @@ pub fn config<const D: usize>(
         exact_projection: false,
         conservative_gradient: false,
         adjoint_projection: false,
+        periodic_hydrostatic: false,
         compressibility_1_pa: 0.45e-9,
         collision_distance_m: 0.5 * l0,
         wall_collision_distance_m: wall_collision_distance_m(D, 0.5 * l0, l0),

@@ -872,6 +872,7 @@ fn invalid_values_are_named_and_located() {
             "mps.exact_projection=false",
             "mps.conservative_gradient=false",
             "mps.adjoint_projection=false",
+            "mps.periodic_hydrostatic=false",
             "mps.particle_shifting=0",
             "mps.particle_shifting_limit=0.2",
             "mps.pressure_floor_pa=0",
@@ -888,6 +889,7 @@ fn invalid_values_are_named_and_located() {
         "mps.exact_projection=true",
         "mps.conservative_gradient=true",
         "mps.adjoint_projection=true",
+        "mps.periodic_hydrostatic=true",
         "mps.pressure_smoothing_time_s=0.01",
     ] {
         let on = ok_with(MINIMAL, &["mps.pressure_scheme=incremental", on]);
@@ -907,6 +909,8 @@ fn invalid_values_are_named_and_located() {
     assert_invalid(&e, "mps.conservative_gradient", None, &["incremental"]);
     let e = err_with(MINIMAL, &["mps.adjoint_projection=true"]);
     assert_invalid(&e, "mps.adjoint_projection", None, &["incremental"]);
+    let e = err_with(MINIMAL, &["mps.periodic_hydrostatic=true"]);
+    assert_invalid(&e, "mps.periodic_hydrostatic", None, &["incremental"]);
     let e = err_with(
         MINIMAL,
         &[

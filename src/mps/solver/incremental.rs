@@ -79,7 +79,7 @@ impl<const D: usize> Solver<D> {
         let p = &self.particles;
         let nb = &self.pairs.near;
         let rho = self.config.density_kg_m3;
-        let rho_g = self.gravity() * rho;
+        let rho_g = self.hydrostatic_gravity() * rho;
         map_particles(p.len(), |i| {
             if p.kind[i] != ParticleKind::Fluid {
                 return Vector::<D>::zeros();
@@ -301,7 +301,7 @@ impl<const D: usize> Solver<D> {
         // velocity correction stays unsmoothed.
         let new_pressure = if c.pressure_smoothing_time_s > 0.0 {
             let share = (dt_s / c.pressure_smoothing_time_s).min(1.0);
-            let rho_g = self.gravity() * rho;
+            let rho_g = self.hydrostatic_gravity() * rho;
             map_particles(p.len(), |i| {
                 let pi = new_pressure[i];
                 if !is_fluid(i) || unknown_of[i] == u32::MAX {
