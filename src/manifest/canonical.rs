@@ -15,7 +15,7 @@
 //! `mps.particle_shifting` (with `mps.particle_shifting_limit`) at 0 (and under the standard
 //! scheme), `mps.pressure_floor_pa` at 0, `mps.yield_penalty_pa_s` at 0 (with
 //! `mps.yield_max_iterations` and `mps.yield_tolerance_1_s`), `mps.yield_velocity_fraction` and
-//! `mps.yield_anderson_depth` at 0, `mps.yield_penalty_local`, `mps.corrected_strain_rate`, `mps.wall_surface_no_slip`, `mps.wall_face_normals`, `mps.quadratic_strain_rate`
+//! `mps.yield_anderson_depth` at 0, `mps.yield_penalty_local`, `mps.corrected_strain_rate`, `mps.wall_surface_no_slip`, `mps.wall_face_normals`, `mps.wall_curvature`, `mps.quadratic_strain_rate`
 //! `mps.exact_projection`, `mps.conservative_gradient`, `mps.adjoint_projection` and `mps.periodic_hydrostatic` (also under the standard scheme) false, `stop.rest_*` without
 //! `stop.rest_metric`, null `mps.wall_collision_*`, `mps.strain_rate_radius`,
 //! `mps.viscous_laplacian_radius`, `time.dt_min_s`, `time.acoustic_courant`, `stop.max_ghost_particles` and the rod's,
@@ -150,6 +150,7 @@ pub fn canonical_text<S: SceneSection>(manifest: &Manifest<S>) -> String {
             ("corrected_strain_rate", manifest.mps.corrected_strain_rate),
             ("wall_surface_no_slip", manifest.mps.wall_surface_no_slip),
             ("wall_face_normals", manifest.mps.wall_face_normals),
+            ("wall_curvature", manifest.mps.wall_curvature),
             ("quadratic_strain_rate", manifest.mps.quadratic_strain_rate),
             (
                 "yield_penalty_adaptive",

@@ -342,6 +342,12 @@ pub struct Mps {
     /// floor under a side wall) by up to a spacing. Experimental, off by default.
     #[serde(default)]
     pub wall_face_normals: bool,
+    /// With `wall_surface_no_slip` and `wall_face_normals`: a wall neighbour's ghost velocity
+    /// continues the parabola that fits the fluid along the wall's normal instead of the line
+    /// through the wall and the particle (exact for a curved profile; lagged a step, zero at
+    /// rest). Experimental.
+    #[serde(default)]
+    pub wall_curvature: bool,
     /// The strain rate's velocity gradient from a weighted least-squares fit of a quadratic
     /// velocity field over the neighbours (exact for a parabolic profile: a sheared zone one
     /// or two spacings thick), instead of the gradient model. Not with
@@ -530,6 +536,7 @@ impl Default for Mps {
             corrected_strain_rate: false,
             wall_surface_no_slip: false,
             wall_face_normals: false,
+            wall_curvature: false,
             quadratic_strain_rate: false,
             strain_rate_radius: None,
             viscous_laplacian_radius: None,

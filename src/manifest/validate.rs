@@ -388,6 +388,14 @@ pub fn check<S: SceneSection>(m: &Manifest<S>) -> Vec<Issue> {
                 .to_string(),
         );
     }
+    if p.wall_curvature && !(p.wall_surface_no_slip && p.wall_face_normals) {
+        c.fail(
+            "mps.wall_curvature",
+            "needs mps.wall_surface_no_slip and mps.wall_face_normals (the ghost's parabola \
+             starts at the no-slip surface, along the wall's own face)"
+                .to_string(),
+        );
+    }
     if p.periodic_hydrostatic && p.pressure_scheme == PressureSchemeName::Standard {
         c.fail(
             "mps.periodic_hydrostatic",

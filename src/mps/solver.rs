@@ -124,6 +124,9 @@ pub struct SolverConfig<const D: usize> {
     /// With `wall_surface_no_slip`, each wall particle's own face for the extrapolation
     /// ([`crate::mps::viscosity::WallFaces`]) instead of one plane fitted per fluid particle.
     pub wall_face_normals: bool,
+    /// The no-slip walls' ghost velocities on the fluid's parabola (`mps.wall_curvature`,
+    /// [`crate::mps::viscosity::ViscousSettings::wall_curvature`]).
+    pub wall_curvature: bool,
     /// Incremental scheme: the increment's equation is -D G with the correction's own
     /// divergence and gradient (exact projection, `solver/exact.rs`) instead of the MPS
     /// Laplacian model.
@@ -520,6 +523,7 @@ impl<const D: usize> Solver<D> {
             gradient: c.strain_rate_gradient,
             wall_surface_m: c.wall_surface_no_slip.then_some(0.5 * c.spacing_m),
             yield_solve: c.yield_solve,
+            wall_curvature: c.wall_curvature,
             slip_walls: c
                 .bodies
                 .iter()

@@ -33,6 +33,10 @@ pub struct ViscousSettings {
     /// [`super::yield_solve`], instead of the regularised viscosity (`None`). Read for a
     /// Bingham fluid without the divergence form only.
     pub yield_solve: Option<YieldSolve>,
+    /// The no-slip walls' ghost velocities continue the fluid's parabola instead of the line
+    /// through the wall and i (see [`wall_half_curvature`]); with `wall_surface_m` and the
+    /// walls' faces only, lagged a step.
+    pub wall_curvature: bool,
 }
 
 /// A rigid body's walls with Navier slip, u_s = b du_t/dn at the body's surface (steel in fresh
@@ -252,10 +256,19 @@ impl<const D: usize> WallFaces<D> {
     /// d_i i's distance to j's face; `None` where j has no face.
     #[inline]
     pub fn factor_of(&self, e: u32, r_ij: &Vector<D>) -> Option<f64> {
+        self.face_of(e, r_ij)
+            .map(|(_, depth_m, gap_m)| 1.0 + depth_m / gap_m)
+    }
+
+    /// Wall or dummy entry `e`'s face as seen from fluid particle i at displacement r_ij: its
+    /// outward normal (reflected for a mirror image), j's depth d_j behind it and i's
+    /// distance d_i in front of it; `None` where j has no face.
+    #[inline]
+    pub fn face_of(&self, e: u32, r_ij: &Vector<D>) -> Option<(Vector<D>, f64, f64)> {
         let face = self.face.get(entry_index(e))?.as_ref()?;
         let n = Neighbours::reflected(e, face.normal);
         let gap_m = ((-r_ij).dot(&n) - face.depth_m).max(self.min_gap_m);
-        Some(1.0 + face.depth_m / gap_m)
+        Some((n, face.depth_m, gap_m))
     }
 }
 
@@ -566,6 +579,79 @@ impl<const D: usize> Loads<'_, D> {
     }
 }
 
+/// Half the curvature b of each fluid particle's velocity along the normal of its nearest
+/// no-slip wall face (zero where it has none, `mps.wall_curvature`): the parabola
+/// u(s) = u_w + (u_i - u_w) s / d_i + b s (s - d_i) through the no-slip surface (s = 0, the
+/// wall's velocity u_w) and i (s = d_i) that best fits, weighted by the kernel, i's fluid
+/// neighbours at their distances s_k = d_i + r_ik . n (one least-squares unknown per
+/// component; neighbours as far from the wall as i do not enter it). The linear mirror
+/// -u_i d_j / d_i is exact for a linear profile only: on a parabola (a body force, a
+/// pressure gradient along the wall) the row over the wall reads the wall's shear as
+/// u_i / d_i and runs fast by (u''/2) d_i^2, and every velocity above carries that
+/// (docs/validation.md, "The walls' curvature"). The ghost of wall neighbour j then gains
+/// b d_j (d_j + d_i), the parabola's value at -d_j less the line's. From u^n: exact in a
+/// steady flow, zero at rest.
+fn wall_half_curvature<const D: usize>(
+    p: &Particles<D>,
+    nb: &Neighbours,
+    radius_m: f64,
+    walls: &Walls<D>,
+    faces: &WallFaces<D>,
+) -> Vec<Vector<D>> {
+    (0..p.len())
+        .into_par_iter()
+        .with_min_len(PARTICLES_PER_TASK)
+        .map(|i| {
+            if p.kind[i] != ParticleKind::Fluid {
+                return Vector::<D>::zeros();
+            }
+            // The nearest no-slip wall neighbour with a face.
+            let mut nearest: Option<(f64, Vector<D>, f64, Vector<D>)> = None;
+            for &e in nb.of(i) {
+                let j = entry_index(e);
+                if p.kind[j] == ParticleKind::Fluid || slip_wall_of(walls.slip, j).is_some() {
+                    continue;
+                }
+                let r = nb.displacement(&p.position_m, i, e);
+                let distance = r.norm();
+                if distance > radius_m || nearest.is_some_and(|(d, ..)| distance >= d) {
+                    continue;
+                }
+                if let Some((normal, _, gap_m)) = faces.face_of(e, &r) {
+                    nearest = Some((distance, normal, gap_m, nb.reflect(e, p.velocity_m_s[j])));
+                }
+            }
+            let Some((_, normal, gap_m, wall_velocity)) = nearest else {
+                return Vector::<D>::zeros();
+            };
+            let own = p.velocity_m_s[i] - wall_velocity;
+            let mut numerator = Vector::<D>::zeros();
+            let mut denominator = 0.0;
+            for &e in nb.of(i) {
+                let k = entry_index(e);
+                if p.kind[k] != ParticleKind::Fluid || Neighbours::is_own_image(e, i) || k == i {
+                    continue;
+                }
+                let r = nb.displacement(&p.position_m, i, e);
+                let w = weight(r.norm(), radius_m);
+                if w == 0.0 {
+                    continue;
+                }
+                let s = gap_m + r.dot(&normal);
+                let basis = s * (s - gap_m);
+                let u = nb.reflect(e, p.velocity_m_s[k]) - wall_velocity - own * (s / gap_m);
+                numerator += u * (w * basis);
+                denominator += w * basis * basis;
+            }
+            if denominator > 0.0 {
+                numerator / denominator
+            } else {
+                Vector::<D>::zeros()
+            }
+        })
+        .collect()
+}
+
 /// Implicit viscous predictor: u* solves u* - dt V(u*) = u^n + dt f, with f the body force
 /// plus, for the incremental pressure scheme, the acceleration -grad(p^n)/rho of the pressure
 /// carried from the last step (`loads.pressure_accel_m_s2`, per particle). The viscosity is
@@ -683,6 +769,19 @@ pub fn predict_velocity<const D: usize>(
         row_of[i] = k as u32;
     }
     let coef = 2.0 * D as f64 / (refs.lambda_visc_m2 * refs.n0_visc);
+    let radius_visc_m = refs.radius_visc_m;
+    let nb = if radius_visc_m != refs.radius_lap_m && radius_visc_m <= refs.radius_n_m {
+        &pairs.near
+    } else {
+        &pairs.lap
+    };
+    // The walls' curvature: only where the no-slip surface and the faces are there.
+    let curvature = match (settings.wall_curvature, walls.surface_m, wall_faces) {
+        (true, Some(_), Some(faces)) => {
+            Some(wall_half_curvature(p, nb, radius_visc_m, &walls, faces))
+        }
+        _ => None,
+    };
     // Row i: (s_i + sum_j c_ij) u_i - sum_fluid c_ij u_j = s_i rhs_i + sum_walls c_ij u_j.
     // A mirror image carries its source's velocity with the plane's normal component
     // negated, so with symmetry planes each component has its own matrix: an image's column
@@ -691,12 +790,6 @@ pub fn predict_velocity<const D: usize>(
     // the diagonal only.
     // The viscous Laplacian's radius may be shorter than the pressure's
     // (`mps.viscous_laplacian_radius`): then the near pairs hold all its neighbours.
-    let radius_visc_m = refs.radius_visc_m;
-    let nb = if radius_visc_m != refs.radius_lap_m && radius_visc_m <= refs.radius_n_m {
-        &pairs.near
-    } else {
-        &pairs.lap
-    };
     let (matrix, extra) = CsrMatrix::assemble(rows.len(), |k, columns, values| {
         let i = rows[k];
         let scale = if divergence_form {
@@ -716,6 +809,18 @@ pub fn predict_velocity<const D: usize>(
                 continue;
             }
             if !is_fluid(j) {
+                // The ghost's part beyond the line: b_i d_j (d_j + d_i), a known term (u^n).
+                if let (Some(b), Some(faces)) = (&curvature, walls.faces)
+                    && frames.slip_wall(j).is_none()
+                    && let Some((_, depth_m, gap_m)) = faces.face_of(e, &r)
+                {
+                    let c_line = if divergence_form {
+                        a * mu[i] * dt_s / rho
+                    } else {
+                        a
+                    };
+                    boundary += b[i] * (c_line * depth_m * (depth_m + gap_m));
+                }
                 a *= frames.factor(e, &r);
             }
             let c = if divergence_form {

@@ -219,6 +219,7 @@ pub fn run_info(path: &Path, size_bytes: u64, run: &RunFile) -> RunInfo {
                 "corrected_strain_rate",
                 "wall_surface_no_slip",
                 "wall_face_normals",
+                "wall_curvature",
                 "quadratic_strain_rate",
                 "strain_rate_radius",
                 "viscous_laplacian_radius",

@@ -120,6 +120,7 @@ pub fn solver_config<const D: usize>(m: &Manifest, scene: &Scene<D>) -> SolverCo
         },
         wall_surface_no_slip: m.mps.wall_surface_no_slip,
         wall_face_normals: m.mps.wall_face_normals,
+        wall_curvature: m.mps.wall_curvature,
         exact_projection: m.mps.exact_projection,
         conservative_gradient: m.mps.conservative_gradient,
         adjoint_projection: m.mps.adjoint_projection,

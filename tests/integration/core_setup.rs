@@ -77,6 +77,7 @@ pub fn config<const D: usize>(
         strain_rate_gradient: mps_runner::mps::viscosity::StrainRateGradient::Plain,
         wall_surface_no_slip: false,
         wall_face_normals: false,
+        wall_curvature: false,
         exact_projection: false,
         conservative_gradient: false,
         adjoint_projection: false,

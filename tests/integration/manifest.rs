@@ -868,6 +868,7 @@ fn invalid_values_are_named_and_located() {
             "mps.corrected_strain_rate=false",
             "mps.wall_surface_no_slip=false",
             "mps.wall_face_normals=false",
+            "mps.wall_curvature=false",
             "mps.quadratic_strain_rate=false",
             "mps.exact_projection=false",
             "mps.conservative_gradient=false",
@@ -905,6 +906,21 @@ fn invalid_values_are_named_and_located() {
         ok_with(MINIMAL, &surface).hash_hex,
         ok_with(MINIMAL, &faces).hash_hex
     );
+    // The walls' curvature needs both, and is part of the experiment.
+    let curvature = [
+        "mps.wall_surface_no_slip=true",
+        "mps.wall_face_normals=true",
+        "mps.wall_curvature=true",
+    ];
+    assert_ne!(
+        ok_with(MINIMAL, &faces).hash_hex,
+        ok_with(MINIMAL, &curvature).hash_hex
+    );
+    let e = err_with(
+        MINIMAL,
+        &["mps.wall_surface_no_slip=true", "mps.wall_curvature=true"],
+    );
+    assert_invalid(&e, "mps.wall_curvature", None, &["wall_face_normals"]);
     let e = err_with(MINIMAL, &["mps.conservative_gradient=true"]);
     assert_invalid(&e, "mps.conservative_gradient", None, &["incremental"]);
     let e = err_with(MINIMAL, &["mps.adjoint_projection=true"]);
