@@ -769,6 +769,8 @@ pub fn predict_velocity<const D: usize>(
         row_of[i] = k as u32;
     }
     let coef = 2.0 * D as f64 / (refs.lambda_visc_m2 * refs.n0_visc);
+    // The viscous Laplacian's radius may be shorter than the pressure's
+    // (`mps.viscous_laplacian_radius`): then the near pairs hold all its neighbours.
     let radius_visc_m = refs.radius_visc_m;
     let nb = if radius_visc_m != refs.radius_lap_m && radius_visc_m <= refs.radius_n_m {
         &pairs.near
@@ -788,8 +790,6 @@ pub fn predict_velocity<const D: usize>(
     // enters with that sign (its plane bits ride in the column's top bits, see
     // `CsrMatrix::component_diagonal`), and i's own image, u_i' - u_i = (sign - 1) u_i, on
     // the diagonal only.
-    // The viscous Laplacian's radius may be shorter than the pressure's
-    // (`mps.viscous_laplacian_radius`): then the near pairs hold all its neighbours.
     let (matrix, extra) = CsrMatrix::assemble(rows.len(), |k, columns, values| {
         let i = rows[k];
         let scale = if divergence_form {

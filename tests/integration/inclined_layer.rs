@@ -108,6 +108,34 @@ fn run(sets: &[&str], threads: usize) -> (mps_runner::run::RunResult, tempfile::
     (common::run_completed(&resolved, dir.path(), threads), dir)
 }
 
+/// The layer resolved with `sets` stepped 100 times from its start: the carried pressure's
+/// push along the slope over them as a share of the body force's (stage momentum), the
+/// fluid particles' count and their largest speed at the end.
+fn carried_push<const D: usize>(sets: &[&str]) -> (f64, usize, f64) {
+    use mps_runner::mps::{ParticleKind, Solver, StageMomentum};
+    let resolved = common::resolve("inclined_layer.yaml", sets);
+    let m = &resolved.manifest;
+    let scene = mps_runner::experiment::build_scene::<D>(m);
+    let config = mps_runner::run::solver_config(m, &scene);
+    let mut solver = Solver::new(config, scene.particles);
+    solver.stage_momentum = Some(StageMomentum::new(0, 0.01, 24));
+    for _ in 0..100 {
+        let dt = solver.next_dt_s(m.time.end_s);
+        solver.step(dt).unwrap();
+    }
+    let sums = solver.stage_momentum.as_ref().unwrap();
+    let carried: f64 = sums.change_m_s.iter().map(|c| c[0]).sum();
+    let body: f64 = sums.change_m_s.iter().map(|c| c[6]).sum();
+    assert!(body > 0.0);
+    let fluid = solver
+        .particles
+        .kind
+        .iter()
+        .filter(|&&k| k == ParticleKind::Fluid)
+        .count();
+    (carried / body, fluid, solver.max_fluid_speed_m_s())
+}
+
 #[test]
 fn a_layer_twice_the_critical_depth_slides_on_a_sheared_zone_at_the_closed_form_speed() {
     let (result, _dir) = run(&[], 2);
@@ -637,38 +665,16 @@ fn the_stage_momentum_diagnostic_accounts_for_every_change_of_velocity_and_chang
 /// the walls). Asserted: above 25 % without, below 2 % with.
 #[test]
 fn the_conservative_gradient_leaves_the_fluid_no_net_push_of_its_own_pressure() {
-    use mps_runner::mps::{ParticleKind, Solver, StageMomentum};
     let push = |conservative: &str| {
-        let resolved = common::resolve(
-            "inclined_layer.yaml",
-            &[
-                "spacing_m=0.01",
-                "scene.period_m=0.12",
-                "scene.disorder=0.2",
-                "mps.pressure_regularisation=0",
-                &format!("mps.conservative_gradient={conservative}"),
-            ],
-        );
-        let m = &resolved.manifest;
-        let scene = mps_runner::experiment::build_scene::<2>(m);
-        let config = mps_runner::run::solver_config(m, &scene);
-        let mut solver = Solver::new(config, scene.particles);
-        solver.stage_momentum = Some(StageMomentum::new(0, 0.01, 24));
-        for _ in 0..100 {
-            let dt = solver.next_dt_s(m.time.end_s);
-            solver.step(dt).unwrap();
-        }
-        let sums = solver.stage_momentum.as_ref().unwrap();
-        let carried: f64 = sums.change_m_s.iter().map(|c| c[0]).sum();
-        let body: f64 = sums.change_m_s.iter().map(|c| c[6]).sum();
-        let fluid = solver
-            .particles
-            .kind
-            .iter()
-            .filter(|&&k| k == ParticleKind::Fluid)
-            .count();
-        assert!(fluid > 100 && body > 0.0);
-        carried / body
+        let (share, fluid, _) = carried_push::<2>(&[
+            "spacing_m=0.01",
+            "scene.period_m=0.12",
+            "scene.disorder=0.2",
+            "mps.pressure_regularisation=0",
+            &format!("mps.conservative_gradient={conservative}"),
+        ]);
+        assert!(fluid > 100);
+        share
     };
     let (built, conservative) = (push("false"), push("true"));
     assert!(built.abs() > 0.25, "as built: {built}");
@@ -685,45 +691,22 @@ fn the_conservative_gradient_leaves_the_fluid_no_net_push_of_its_own_pressure() 
 /// layer rigid either way (docs/validation.md, "The walls' pressure along a periodic slope").
 #[test]
 fn the_walls_pressure_leaves_a_periodic_slope_no_push_along_it_with_periodic_hydrostatic() {
-    use mps_runner::mps::{ParticleKind, Solver, StageMomentum};
     let push = |periodic: &str| {
-        let resolved = common::resolve(
-            "inclined_layer.yaml",
-            &[
-                "dimension=3",
-                "spacing_m=0.01",
-                "scene.period_m=0.12",
-                "scene.width_m=0.12",
-                "scene.side_slip_length_m=1000",
-                "mps.preset=quiet",
-                "fluid.yield_stress_pa=42.4",
-                "fluid.plastic_viscosity_pa_s=20",
-                "scene.layer_depth_m=0.02",
-                &format!("mps.periodic_hydrostatic={periodic}"),
-            ],
-        );
-        let m = &resolved.manifest;
-        let scene = mps_runner::experiment::build_scene::<3>(m);
-        let config = mps_runner::run::solver_config(m, &scene);
-        let mut solver = Solver::new(config, scene.particles);
-        solver.stage_momentum = Some(StageMomentum::new(0, 0.01, 4));
-        for _ in 0..100 {
-            let dt = solver.next_dt_s(m.time.end_s);
-            solver.step(dt).unwrap();
-        }
-        let sums = solver.stage_momentum.as_ref().unwrap();
-        let carried: f64 = sums.change_m_s.iter().map(|c| c[0]).sum();
-        let body: f64 = sums.change_m_s.iter().map(|c| c[6]).sum();
-        let fluid = solver
-            .particles
-            .kind
-            .iter()
-            .filter(|&&k| k == ParticleKind::Fluid)
-            .count();
+        let (share, fluid, speed) = carried_push::<3>(&[
+            "dimension=3",
+            "spacing_m=0.01",
+            "scene.period_m=0.12",
+            "scene.width_m=0.12",
+            "scene.side_slip_length_m=1000",
+            "mps.preset=quiet",
+            "fluid.yield_stress_pa=42.4",
+            "fluid.plastic_viscosity_pa_s=20",
+            "scene.layer_depth_m=0.02",
+            &format!("mps.periodic_hydrostatic={periodic}"),
+        ]);
         assert_eq!(fluid, 288);
-        let speed = solver.max_fluid_speed_m_s();
         assert!(speed < 1e-4, "max speed {speed} m/s at 0.93 h_c");
-        carried / body
+        share
     };
     let (built, periodic) = (push("false"), push("true"));
     assert!(built < -0.05, "as built: {built}");
