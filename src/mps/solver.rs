@@ -523,7 +523,7 @@ impl<const D: usize> Solver<D> {
             gradient: c.strain_rate_gradient,
             wall_surface_m: c.wall_surface_no_slip.then_some(0.5 * c.spacing_m),
             yield_solve: c.yield_solve,
-            wall_curvature: c.wall_curvature,
+            wall_curvature: c.wall_curvature.then_some(c.spacing_m),
             slip_walls: c
                 .bodies
                 .iter()

@@ -33,10 +33,11 @@ pub struct ViscousSettings {
     /// [`super::yield_solve`], instead of the regularised viscosity (`None`). Read for a
     /// Bingham fluid without the divergence form only.
     pub yield_solve: Option<YieldSolve>,
-    /// The no-slip walls' ghost velocities continue the fluid's parabola instead of the line
-    /// through the wall and i (see [`wall_half_curvature`]); with `wall_surface_m` and the
-    /// walls' faces only, lagged a step.
-    pub wall_curvature: bool,
+    /// `Some(l0)`, the lattice spacing: the no-slip walls' ghost velocities continue the
+    /// fluid's parabola instead of the line through the wall and i (see
+    /// [`wall_half_curvature`]); with `wall_surface_m` and the walls' faces only, lagged a
+    /// step. l0 sets the least span of neighbours the fit trusts.
+    pub wall_curvature: Option<f64>,
 }
 
 /// A rigid body's walls with Navier slip, u_s = b du_t/dn at the body's surface (steel in fresh
@@ -143,16 +144,27 @@ impl<'a, const D: usize> Frames<'a, D> {
     /// displacement r_ij (1 for a wall that carries its own velocity).
     #[inline]
     pub(crate) fn factor(&self, e: u32, r_ij: &Vector<D>) -> f64 {
-        let j = entry_index(e);
-        if let Some(wall) = self.slip_wall(j)
+        self.factor_and_face(e, r_ij).0
+    }
+
+    /// [`Self::factor`], with the face of a wall that does not slip (depth d_j behind it,
+    /// i's gap d_i in front) where the factor came from one.
+    #[inline]
+    pub(crate) fn factor_and_face(&self, e: u32, r_ij: &Vector<D>) -> (f64, Option<(f64, f64)>) {
+        let slip_wall = self.slip_wall(entry_index(e));
+        if let Some(wall) = slip_wall
             && let Some(f) = &self.slip
         {
-            return f.factor(r_ij) * f.gap_m / (f.gap_m + wall.slip_length_m);
+            return (
+                f.factor(r_ij) * f.gap_m / (f.gap_m + wall.slip_length_m),
+                None,
+            );
         }
-        if let Some(f) = self.faces.and_then(|faces| faces.factor_of(e, r_ij)) {
-            return f;
+        if let Some((_, depth_m, gap_m)) = self.faces.and_then(|faces| faces.face_of(e, r_ij)) {
+            let face = slip_wall.is_none().then_some((depth_m, gap_m));
+            return (WallFaces::<D>::factor(depth_m, gap_m), face);
         }
-        self.no_slip.as_ref().map_or(1.0, |f| f.factor(r_ij))
+        (self.no_slip.as_ref().map_or(1.0, |f| f.factor(r_ij)), None)
     }
 }
 
@@ -257,7 +269,13 @@ impl<const D: usize> WallFaces<D> {
     #[inline]
     pub fn factor_of(&self, e: u32, r_ij: &Vector<D>) -> Option<f64> {
         self.face_of(e, r_ij)
-            .map(|(_, depth_m, gap_m)| 1.0 + depth_m / gap_m)
+            .map(|(_, depth_m, gap_m)| Self::factor(depth_m, gap_m))
+    }
+
+    /// 1 + d_j/d_i.
+    #[inline]
+    fn factor(depth_m: f64, gap_m: f64) -> f64 {
+        1.0 + depth_m / gap_m
     }
 
     /// Wall or dummy entry `e`'s face as seen from fluid particle i at displacement r_ij: its
@@ -591,13 +609,21 @@ impl<const D: usize> Loads<'_, D> {
 /// (docs/validation.md, "The walls' curvature"). The ghost of wall neighbour j then gains
 /// b d_j (d_j + d_i), the parabola's value at -d_j less the line's. From u^n: exact in a
 /// steady flow, zero at rest.
+///
+/// b is left 0 unless the fit's denominator sum w (s (s - d_i))^2 reaches that of one
+/// neighbour a spacing l0 further out, w(l0) (l0 (d_i + l0))^2, as every particle over a
+/// filled wall has: a particle whose neighbours lie about as far from the wall as itself (a
+/// stray one in a lifted cone) has a denominator near 0 and an unbounded b (the 8 mm slump
+/// blew up on one).
 fn wall_half_curvature<const D: usize>(
     p: &Particles<D>,
     nb: &Neighbours,
     radius_m: f64,
+    spacing_m: f64,
     walls: &Walls<D>,
     faces: &WallFaces<D>,
 ) -> Vec<Vector<D>> {
+    let least_weight = weight(spacing_m, radius_m);
     (0..p.len())
         .into_par_iter()
         .with_min_len(PARTICLES_PER_TASK)
@@ -643,7 +669,8 @@ fn wall_half_curvature<const D: usize>(
                 numerator += u * (w * basis);
                 denominator += w * basis * basis;
             }
-            if denominator > 0.0 {
+            let least_span = spacing_m * (gap_m + spacing_m);
+            if denominator > 0.0 && denominator >= least_weight * least_span * least_span {
                 numerator / denominator
             } else {
                 Vector::<D>::zeros()
@@ -779,9 +806,14 @@ pub fn predict_velocity<const D: usize>(
     };
     // The walls' curvature: only where the no-slip surface and the faces are there.
     let curvature = match (settings.wall_curvature, walls.surface_m, wall_faces) {
-        (true, Some(_), Some(faces)) => {
-            Some(wall_half_curvature(p, nb, radius_visc_m, &walls, faces))
-        }
+        (Some(spacing_m), Some(_), Some(faces)) => Some(wall_half_curvature(
+            p,
+            nb,
+            radius_visc_m,
+            spacing_m,
+            &walls,
+            faces,
+        )),
         _ => None,
     };
     // Row i: (s_i + sum_j c_ij) u_i - sum_fluid c_ij u_j = s_i rhs_i + sum_walls c_ij u_j.
@@ -809,11 +841,9 @@ pub fn predict_velocity<const D: usize>(
                 continue;
             }
             if !is_fluid(j) {
+                let (factor, face) = frames.factor_and_face(e, &r);
                 // The ghost's part beyond the line: b_i d_j (d_j + d_i), a known term (u^n).
-                if let (Some(b), Some(faces)) = (&curvature, walls.faces)
-                    && frames.slip_wall(j).is_none()
-                    && let Some((_, depth_m, gap_m)) = faces.face_of(e, &r)
-                {
+                if let (Some(b), Some((depth_m, gap_m))) = (&curvature, face) {
                     let c_line = if divergence_form {
                         a * mu[i] * dt_s / rho
                     } else {
@@ -821,7 +851,7 @@ pub fn predict_velocity<const D: usize>(
                     };
                     boundary += b[i] * (c_line * depth_m * (depth_m + gap_m));
                 }
-                a *= frames.factor(e, &r);
+                a *= factor;
             }
             let c = if divergence_form {
                 let mu_ij = if is_fluid(j) {

@@ -95,7 +95,7 @@ fn bingham_poiseuille_counted(
         wall_surface_m: yield_solve.map(|_| 0.5 * l0),
         slip_walls: Vec::new(),
         yield_solve,
-        wall_curvature: false,
+        wall_curvature: None,
     };
     let force = Vector::<2>::new(g_pa_m / rho, 0.0);
     let dt_s = 0.05;

@@ -665,6 +665,95 @@ fn wall_face_normals_extrapolate_through_each_face_at_an_edge() {
     );
 }
 
+/// `mps.wall_curvature`'s fit is trusted only where the particle's fluid neighbours reach at
+/// least a spacing further from the wall (`wall_half_curvature`'s floor): a single row over
+/// the floor, its heights off the lattice by a thousandth of a spacing (so that the fit's
+/// denominator is tiny but not zero) and its velocities uneven, steps exactly as with the
+/// line, where an unfloored fit reads a curvature of order u / (d_i 1e-3 l0) (the 8 mm slump
+/// blew up on one such particle). Two rows with a curved profile do get the term: the test
+/// would pass vacuously if it never acted.
+#[test]
+fn the_walls_curvature_is_left_out_where_the_fit_has_no_span() {
+    use mps_runner::mps::grid::KernelPairs;
+    use mps_runner::mps::kernel::RefValues;
+    use mps_runner::mps::viscosity::{
+        FACE_RADIUS_SPACINGS, Loads, StrainRateGradient, ViscousSettings, WallFaces,
+        predict_velocity,
+    };
+    const COLUMNS: i32 = 10;
+    let l0 = 0.01;
+    let step = |fluid_rows: i32, wall_curvature: Option<f64>| {
+        let mut p = mps_runner::mps::Particles::<2>::default();
+        for row in -3..fluid_rows {
+            for col in 0..COLUMNS {
+                let jitter = if row >= 0 {
+                    1e-3 * f64::from((col * 7) % 5 - 2) / 2.0
+                } else {
+                    0.0
+                };
+                let x = Vector::<2>::new(
+                    (f64::from(col) + 0.5) * l0,
+                    (f64::from(row) + 0.5 + jitter) * l0,
+                );
+                let kind = if row >= 0 {
+                    ParticleKind::Fluid
+                } else {
+                    ParticleKind::Wall
+                };
+                p.push(x, kind);
+                let k = p.len() - 1;
+                if row >= 0 {
+                    // Uneven along the row; a parabola's values up the rows.
+                    let s = f64::from(row) + 0.5;
+                    let along = 1.0 + 0.5 * f64::from(col % 3);
+                    p.velocity_m_s[k] = Vector::<2>::new(0.01 * along * s * (4.0 - s), 0.0);
+                }
+            }
+        }
+        let refs = RefValues::on_lattice::<2>(l0, 2.1 * l0, 3.1 * l0);
+        let nb =
+            Neighbours::build_periodic_x(&p.position_m, refs.radius_lap_m, f64::from(COLUMNS) * l0);
+        let pairs = KernelPairs::new(&nb, &p.position_m, refs.radius_n_m, refs.radius_lap_m);
+        let faces = WallFaces::build(&p, &nb, FACE_RADIUS_SPACINGS * l0, 0.5 * l0);
+        let settings = ViscousSettings {
+            rheology: mps_runner::mps::Rheology::Newtonian {
+                viscosity_pa_s: 50.0,
+            },
+            density_kg_m3: 2300.0,
+            stress_gradient_term: false,
+            tolerance: 1e-12,
+            max_iterations: 10_000,
+            gradient: StrainRateGradient::Corrected,
+            wall_surface_m: Some(0.5 * l0),
+            slip_walls: Vec::new(),
+            yield_solve: None,
+            wall_curvature,
+        };
+        let loads = Loads {
+            wall_faces: Some(&faces),
+            ..Loads::body_force(Vector::<2>::new(1.0, -9.81))
+        };
+        let stage = predict_velocity(&p, &pairs, &refs, &settings, loads, 1e-3);
+        assert!(stage.solve.converged, "{:?}", stage.solve);
+        stage.velocity_m_s
+    };
+    assert_eq!(
+        step(1, Some(l0)),
+        step(1, None),
+        "a single row's fit has no span: the line stays"
+    );
+    let (curved, line) = (step(2, Some(l0)), step(2, None));
+    let largest = curved
+        .iter()
+        .zip(&line)
+        .map(|(a, b)| (a - b).norm())
+        .fold(0.0, f64::max);
+    assert!(
+        largest > 1e-6,
+        "two rows on a parabola: the curvature acts (largest change {largest} m/s)"
+    );
+}
+
 /// The walls' own faces are exact wherever the fluid sits along a flat floor: fluid rows slid
 /// off the wall lattice by a fraction of a spacing (as a layer that has flowed and stopped),
 /// every wall and dummy neighbour within the viscous radius gets 1 + d_j/d_i with d_i the

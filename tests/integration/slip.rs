@@ -84,7 +84,7 @@ fn steady(slip_length_m: Option<f64>) -> Vec<(f64, f64, f64)> {
             .into_iter()
             .collect(),
         yield_solve: None,
-        wall_curvature: false,
+        wall_curvature: None,
     };
     for step in 0..2_000 {
         let stage = predict_velocity(
