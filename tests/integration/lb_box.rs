@@ -97,7 +97,7 @@ fn bad_sections_are_named() {
 /// A coarse pour: the volume that entered is 13 L within one particle per lattice point of
 /// the inlet's cross-section (one layer), nothing is lost, and the run replays bit for bit
 /// from the start and from a checkpoint taken mid-pour. Run as the half beside the mirror
-/// plane (the summary's metrics are the whole box's): a third of the whole's time.
+/// plane (the summary's metrics are the whole box's), half the particles.
 #[test]
 fn pour_volume_nothing_lost_and_replays_mid_pour() {
     let l0 = 0.025;
@@ -143,7 +143,7 @@ fn pour_volume_nothing_lost_and_replays_mid_pour() {
 /// (2006), x(h) = (W/(2k)) [h - (W/2) ln(1 + 2h/W)] back from the front, and the heap of the
 /// poured volume against the back wall ends at a closed-form distance. At 25 mm the heap
 /// comes to rest by the manifest's rule (the front moving under 0.2 mm a second) at 22 s,
-/// before its 30 s cap (at 20 mm it still crept at 30 s, and took 2.3 times as long). Run as
+/// before its 30 s cap (at 20 mm, twice the particles, it still crept at 30 s). Run as
 /// the half beside the mirror plane y = W/2 (`scene.half_domain`, which `tests/symmetry.rs`
 /// holds to the whole): half the cost, and the summary's metrics are the whole box's.
 #[test]
