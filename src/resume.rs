@@ -243,6 +243,7 @@ fn resume_in<const D: usize>(job: Job) -> Result<RunResult, ResumeError> {
         interrupt: options.interrupt.clone(),
         progress: options.progress.clone(),
         stop_at_step: None,
+        rules_during_pour: false,
     };
     let start = LoopStart {
         restored: true,

@@ -487,6 +487,15 @@ impl<const D: usize> Solver<D> {
         })
     }
 
+    /// Whether an inlet still has particles to pour (started or not).
+    pub fn pouring(&self) -> bool {
+        let c = &self.config;
+        c.inlets
+            .iter()
+            .zip(&self.inlet_emitted)
+            .any(|(inlet, &emitted)| emitted < inlet.total_count(c.spacing_m))
+    }
+
     /// Time step from the CFL condition (Courant number on the largest speed) and dt_max, never
     /// past `end_time_s`. Viscosity is implicit, so it sets no limit. An inlet that pours
     /// during the next step (started or starting within dt_max, not finished) counts with its

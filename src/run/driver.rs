@@ -128,6 +128,24 @@ pub struct LoopControl {
     /// Stop as "interrupted" once this step is reached (a replay of an interrupted or cut
     /// short run, or of a segment), at the same point of the loop as a signal would.
     pub stop_at_step: Option<u64>,
+    /// The stop rules as builds before the pour rule applied them: a rule may stop the run
+    /// while an inlet still has concrete to pour (the replay of a file written then; see
+    /// [`POURED`]).
+    pub rules_during_pour: bool,
+}
+
+/// Added to a stop rule's reason in a run with inlets: the rules wait until every inlet has
+/// poured its volume (a front that stalls mid-pour, the first splash run out along the
+/// channel, is not the material at rest). A file whose rule-stopped reason lacks it was
+/// written before the rules waited, and is replayed by the rules as they were then.
+pub const POURED: &str = " (every inlet had poured)";
+
+/// Whether a file whose summary gives `stop` was stopped by a rule as the rules were before
+/// they waited for the inlets (a rule's reason without [`POURED`]; without inlets the two
+/// agree): its replay takes the rules it was written under.
+pub fn rules_during_pour(stop: &str) -> bool {
+    let by_rule = stop.starts_with("settled: ") || stop.contains("(stop.non_flowing_fraction = ");
+    by_rule && !stop.ends_with(POURED)
 }
 
 /// How the loop ended: the outcome and the summary (metrics at the last state, every
@@ -170,6 +188,14 @@ pub fn time_loop<const D: usize>(
         crate::manifest::canonical::short_hash(experiment_sha256)
     );
     let stops_early = m.stop.rest_metric.is_some() || m.stop.non_flowing_fraction.is_some();
+    let has_inlets = !solver.config.inlets.is_empty();
+    // Whether a stop rule may fire now, and what its reason then ends with.
+    let rules_apply = |solver: &Solver<D>| control.rules_during_pour || !solver.pouring();
+    let poured = if has_inlets && !control.rules_during_pour {
+        POURED
+    } else {
+        ""
+    };
     let mut tracked = RowTracker::new(m);
     for (t, metrics) in &start.logged_rows {
         tracked.row(*t, |k| metrics.get(k).copied());
@@ -219,9 +245,10 @@ pub fn time_loop<const D: usize>(
                 if let Some(change) = change
                     && t >= m.stop.rest_after_s
                     && change < m.stop.rest_metric_change
+                    && rules_apply(solver)
                 {
                     stop_reason = format!(
-                        "settled: {name} changed by {change:.3e} over the last checkpoint interval (stop.rest_metric_change = {})",
+                        "settled: {name} changed by {change:.3e} over the last checkpoint interval (stop.rest_metric_change = {}){poured}",
                         m.stop.rest_metric_change
                     );
                     break;
@@ -283,9 +310,10 @@ pub fn time_loop<const D: usize>(
         if let (Some(share), Some(r)) = (m.stop.non_flowing_fraction, &report)
             && solver.time_s >= m.stop.non_flowing_after_s
             && r.non_flowing_fraction >= share
+            && rules_apply(solver)
         {
             stop_reason = format!(
-                "{:.1} % of the fluid particles are non-flowing (stop.non_flowing_fraction = {share})",
+                "{:.1} % of the fluid particles are non-flowing (stop.non_flowing_fraction = {share}){poured}",
                 100.0 * r.non_flowing_fraction
             );
             break;

@@ -9,7 +9,10 @@ pub mod driver;
 pub mod frames;
 
 pub use config::{rheology, solver_config};
-pub use driver::{LoopControl, LoopEnd, LoopStart, Progress, ProgressFn, Sink, time_loop};
+pub use driver::{
+    LoopControl, LoopEnd, LoopStart, POURED, Progress, ProgressFn, Sink, rules_during_pour,
+    time_loop,
+};
 pub use frames::time_ns;
 
 use crate::experiment::{Resolved, build_scene};
@@ -207,6 +210,7 @@ fn run_in<const D: usize>(
         interrupt: options.interrupt.clone(),
         progress: options.progress.clone(),
         stop_at_step: None,
+        rules_during_pour: false,
     };
     let end = time_loop(
         m,

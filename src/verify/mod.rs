@@ -525,6 +525,10 @@ fn replay<const D: usize>(
         interrupt: None,
         progress: options.progress.clone(),
         stop_at_step: (!runs_to_end).then(|| run.states[to as usize].step),
+        rules_during_pour: run
+            .summary
+            .as_ref()
+            .is_some_and(|s| crate::run::rules_during_pour(&s.stop)),
     };
     let mut sink = Compare {
         logged: &run.states,

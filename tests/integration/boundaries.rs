@@ -234,3 +234,78 @@ fn an_obstacle_on_the_tank_floor_adds_no_particle_twice() {
         );
     }
 }
+
+/// A stop rule waits until every inlet has poured: a front that stalls mid-pour (at 80 Pa the
+/// 20 mm half L-box's first splash ran out along the channel and stood still while the pour
+/// went on, and its rest rule stopped the run at 6 s with 9.6 of 13 L poured) is not the
+/// material at rest. Here a rule that holds at every checkpoint (any change below 1e9 m) would
+/// stop the 0.2 s pour at its first checkpoint after 0.02 s; it waits for the last particle,
+/// and says so. A file written under the rules as they were (stopped mid-pour) still replays.
+#[test]
+fn a_stop_rule_waits_for_the_pour_and_files_stopped_mid_pour_still_verify() {
+    use mps_runner::record::{Outcome, Recorder};
+    use mps_runner::run::{
+        LoopControl, LoopStart, POURED, run_header, solver_config, time_loop, time_ns,
+        write_file_records,
+    };
+    let mut sets = SETS.to_vec();
+    sets.extend([
+        "output.checkpoint_interval_s=0.02",
+        "stop.rest_metric=front_position_m",
+        "stop.rest_metric_change=1e9",
+        "stop.rest_after_s=0.02",
+    ]);
+    let resolved = common::resolve("pour_2d.yaml", &sets);
+    let m = &resolved.manifest;
+    let dir = tempfile::tempdir().unwrap();
+    let result = common::run_completed(&resolved, dir.path(), 1);
+    let stop = &result.summary.stop;
+    assert!(
+        stop.starts_with("settled") && stop.ends_with(POURED),
+        "{stop}"
+    );
+    let run = read_run(&result.path).unwrap();
+    let last = run.states.last().unwrap();
+    let poured = last.kind.iter().filter(|&&k| k == 0 || k == 3).count() - 200;
+    assert_eq!(poured, 120, "the whole pour");
+    // The pour lasts 0.2 s (the test above): stopped at the first checkpoint after it.
+    let t = result.summary.metrics["stop_time_s"];
+    assert!((0.2..0.25).contains(&t), "stopped at {t} s");
+    common::assert_replays(&result.path, None);
+
+    // The same run under the rules as they were: stopped at 0.04 s, mid-pour, without the
+    // mark; its replay takes the rules it was written under.
+    let scene = build_scene::<2>(m);
+    let mut solver = mps_runner::mps::Solver::new(solver_config(m, &scene), scene.particles);
+    let path = dir.path().join("before.mcap");
+    let mut recorder = Recorder::create(&path, &run_header(&resolved, 1)).unwrap();
+    write_file_records(m, &mut recorder).unwrap();
+    let control = LoopControl {
+        rules_during_pour: true,
+        ..LoopControl::default()
+    };
+    let end = time_loop(
+        m,
+        &resolved.hash_hex,
+        &mut solver,
+        LoopStart::default(),
+        &control,
+        &mut recorder,
+    )
+    .unwrap();
+    assert_eq!(end.outcome, Outcome::Completed);
+    assert!(
+        end.stop_reason.starts_with("settled") && !end.stop_reason.ends_with(POURED),
+        "{}",
+        end.stop_reason
+    );
+    assert!(
+        solver.pouring() && solver.time_s < 0.05,
+        "t = {}",
+        solver.time_s
+    );
+    recorder
+        .finish(time_ns(solver.time_s), &end.summary, &end.outcome)
+        .unwrap();
+    common::assert_replays(&path, None);
+}
