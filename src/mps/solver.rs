@@ -487,13 +487,19 @@ impl<const D: usize> Solver<D> {
         })
     }
 
-    /// Whether an inlet still has particles to pour (started or not).
-    pub fn pouring(&self) -> bool {
+    /// The inlets that still have particles to pour (started or not).
+    fn pouring_inlets(&self) -> impl Iterator<Item = &Inlet<D>> {
         let c = &self.config;
         c.inlets
             .iter()
             .zip(&self.inlet_emitted)
-            .any(|(inlet, &emitted)| emitted < inlet.total_count(c.spacing_m))
+            .filter(|(inlet, emitted)| **emitted < inlet.total_count(c.spacing_m))
+            .map(|(inlet, _)| inlet)
+    }
+
+    /// Whether an inlet still has particles to pour (started or not).
+    pub fn pouring(&self) -> bool {
+        self.pouring_inlets().next().is_some()
     }
 
     /// Time step from the CFL condition (Courant number on the largest speed) and dt_max, never
@@ -504,9 +510,8 @@ impl<const D: usize> Solver<D> {
         let c = &self.config;
         let mut dt = c.dt_max_s;
         let mut speed = self.max_fluid_speed_m_s();
-        for (inlet, &emitted) in c.inlets.iter().zip(&self.inlet_emitted) {
-            if emitted < inlet.total_count(c.spacing_m) && self.time_s + c.dt_max_s >= inlet.start_s
-            {
+        for inlet in self.pouring_inlets() {
+            if self.time_s + c.dt_max_s >= inlet.start_s {
                 speed = speed.max(inlet.speed_m_s);
             }
         }

@@ -144,9 +144,14 @@ pub const POURED: &str = " (every inlet had poured)";
 /// they waited for the inlets (a rule's reason without [`POURED`]; without inlets the two
 /// agree): its replay takes the rules it was written under.
 pub fn rules_during_pour(stop: &str) -> bool {
-    let by_rule = stop.starts_with("settled: ") || stop.contains("(stop.non_flowing_fraction = ");
+    let by_rule = stop.starts_with(SETTLED) || stop.contains(NON_FLOWING_RULE);
     by_rule && !stop.ends_with(POURED)
 }
+
+/// How the rest rule's reason starts, and what the non-flowing rule's holds (written below,
+/// recognised by [`rules_during_pour`]).
+const SETTLED: &str = "settled: ";
+const NON_FLOWING_RULE: &str = "(stop.non_flowing_fraction = ";
 
 /// How the loop ended: the outcome and the summary (metrics at the last state, every
 /// checkpoint hash).
@@ -248,7 +253,7 @@ pub fn time_loop<const D: usize>(
                     && rules_apply(solver)
                 {
                     stop_reason = format!(
-                        "settled: {name} changed by {change:.3e} over the last checkpoint interval (stop.rest_metric_change = {}){poured}",
+                        "{SETTLED}{name} changed by {change:.3e} over the last checkpoint interval (stop.rest_metric_change = {}){poured}",
                         m.stop.rest_metric_change
                     );
                     break;
@@ -313,7 +318,7 @@ pub fn time_loop<const D: usize>(
             && rules_apply(solver)
         {
             stop_reason = format!(
-                "{:.1} % of the fluid particles are non-flowing (stop.non_flowing_fraction = {share}){poured}",
+                "{:.1} % of the fluid particles are non-flowing {NON_FLOWING_RULE}{share}){poured}",
                 100.0 * r.non_flowing_fraction
             );
             break;
