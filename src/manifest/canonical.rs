@@ -15,7 +15,7 @@
 //! `mps.particle_shifting` (with `mps.particle_shifting_limit`) at 0 (and under the standard
 //! scheme), `mps.pressure_floor_pa` at 0, `mps.yield_penalty_pa_s` at 0 (with
 //! `mps.yield_max_iterations` and `mps.yield_tolerance_1_s`), `mps.yield_velocity_fraction` and
-//! `mps.yield_anderson_depth` at 0, `mps.yield_penalty_local`, `mps.corrected_strain_rate`, `mps.wall_surface_no_slip`, `mps.wall_face_normals`, `mps.wall_curvature`, `mps.quadratic_strain_rate`
+//! `mps.yield_anderson_depth` at 0, `mps.yield_penalty_local`, `mps.yield_velocity_relative`, `mps.corrected_strain_rate`, `mps.wall_surface_no_slip`, `mps.wall_face_normals`, `mps.wall_curvature`, `mps.quadratic_strain_rate`
 //! `mps.exact_projection`, `mps.conservative_gradient`, `mps.adjoint_projection` and `mps.periodic_hydrostatic` (also under the standard scheme) false, `stop.rest_*` without
 //! `stop.rest_metric`, null `mps.wall_collision_*`, `mps.strain_rate_radius`,
 //! `mps.viscous_laplacian_radius`, `time.dt_min_s`, `time.acoustic_courant`, `stop.max_ghost_particles` and the rod's,
@@ -137,6 +137,7 @@ pub fn canonical_text<S: SceneSection>(manifest: &Manifest<S>) -> String {
                 "yield_tolerance_1_s",
                 "yield_penalty_adaptive",
                 "yield_penalty_local",
+                "yield_velocity_relative",
                 "yield_consistent_divergence",
                 "yield_volumetric_limit",
             ] {
@@ -157,6 +158,10 @@ pub fn canonical_text<S: SceneSection>(manifest: &Manifest<S>) -> String {
                 manifest.mps.yield_penalty_adaptive,
             ),
             ("yield_penalty_local", manifest.mps.yield_penalty_local),
+            (
+                "yield_velocity_relative",
+                manifest.mps.yield_velocity_relative,
+            ),
             (
                 "yield_consistent_divergence",
                 manifest.mps.yield_consistent_divergence,

@@ -424,6 +424,11 @@ pub struct Mps {
     /// u steps); 0 = solve to `viscosity_tolerance`, as before.
     #[serde(default)]
     pub yield_velocity_fraction: f64,
+    /// With `yield_velocity_fraction`: each velocity solve's floor scales with how far the
+    /// iterations still are from `yield_tolerance_1_s` (`src/mps/yield_solve.rs`, `solve`).
+    /// Off: the fraction of the tolerance in every iteration, as before.
+    #[serde(default)]
+    pub yield_velocity_relative: bool,
     /// Anderson acceleration of the yield solve's iterations over the last this many of them
     /// (`src/mps/anderson.rs`); 0 = plain iterations, as before.
     #[serde(default)]
@@ -553,6 +558,7 @@ impl Default for Mps {
             yield_penalty_adaptive: false,
             yield_penalty_local: false,
             yield_velocity_fraction: 0.0,
+            yield_velocity_relative: false,
             yield_anderson_depth: 0,
             yield_consistent_divergence: false,
             yield_volumetric_limit: None,

@@ -375,6 +375,13 @@ pub fn check<S: SceneSection>(m: &Manifest<S>) -> Vec<Issue> {
             "needs mps.wall_surface_no_slip: true (it places that no-slip surface)".to_string(),
         );
     }
+    if p.yield_velocity_relative && p.yield_velocity_fraction == 0.0 {
+        c.fail(
+            "mps.yield_velocity_relative",
+            "needs mps.yield_velocity_fraction > 0 (the fraction whose floor it scales)"
+                .to_string(),
+        );
+    }
     if p.yield_penalty_adaptive && p.yield_penalty_pa_s == 0.0 {
         c.fail(
             "mps.yield_penalty_adaptive",

@@ -233,6 +233,7 @@ pub fn run_info(path: &Path, size_bytes: u64, run: &RunFile) -> RunInfo {
                 "yield_penalty_adaptive",
                 "yield_penalty_local",
                 "yield_velocity_fraction",
+                "yield_velocity_relative",
                 "yield_anderson_depth",
                 "yield_consistent_divergence",
                 "yield_volumetric_limit",

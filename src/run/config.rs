@@ -57,6 +57,7 @@ pub fn solver_config<const D: usize>(m: &Manifest, scene: &Scene<D>) -> SolverCo
             tolerance_1_s: m.mps.yield_tolerance_1_s,
             adaptive: m.mps.yield_penalty_adaptive,
             velocity_fraction: m.mps.yield_velocity_fraction,
+            velocity_relative: m.mps.yield_velocity_relative,
             anderson_depth: m.mps.yield_anderson_depth,
             consistent_divergence: m
                 .mps

@@ -1023,6 +1023,7 @@ fn invalid_values_are_named_and_located() {
     let mut sets = yield_solve.to_vec();
     sets.push("mps.yield_velocity_fraction=0");
     sets.push("mps.yield_anderson_depth=0");
+    sets.push("mps.yield_velocity_relative=false");
     assert_eq!(ok_with(&heap, &sets).hash_hex, exact.hash_hex);
     // Inexact steps, then the consistent divergence, on top: each changes the hash and is
     // named in the canonical form.
@@ -1030,6 +1031,10 @@ fn invalid_values_are_named_and_located() {
         (
             "mps.yield_velocity_fraction=0.1",
             r#""yield_velocity_fraction":0.1"#,
+        ),
+        (
+            "mps.yield_velocity_relative=true",
+            r#""yield_velocity_relative":true"#,
         ),
         (
             "mps.yield_consistent_divergence=true",
@@ -1071,6 +1076,17 @@ fn invalid_values_are_named_and_located() {
         "mps.yield_volumetric_limit",
         None,
         &["[0, 1000000]", "-1"],
+    );
+    // The relative floor scales the inexact steps' floor: without a fraction it has none.
+    let e = err_with(
+        &heap,
+        &[&yield_solve[..], &["mps.yield_velocity_relative=true"]].concat(),
+    );
+    assert_invalid(
+        &e,
+        "mps.yield_velocity_relative",
+        None,
+        &["mps.yield_velocity_fraction > 0"],
     );
     let e = err_with(MINIMAL, &["mps.yield_volumetric_limit=1"]);
     assert_invalid(

@@ -1089,6 +1089,7 @@ fn checkerboard_left(smoothing_s: f64) -> (f64, f64) {
         tolerance_1_s: 1e-3,
         adaptive: true,
         velocity_fraction: 0.1,
+        velocity_relative: false,
         consistent_divergence: None,
         anderson_depth: 0,
         volumetric_limit: None,
