@@ -528,8 +528,9 @@ pub(crate) struct YieldOutcome<const D: usize> {
 /// the first, the mismatch at the step's start): an inexact augmented Lagrangian whose u
 /// steps are only as exact as the iterations have come (a relative error criterion, Eckstein
 /// & Bertsekas 1992, Eckstein & Silva 2013). Early iterations are far from the tolerance and
-/// need no u step finer than their own error; the last ones, near it, get the same floor as
-/// without. Each CG solve then stops after a few iterations instead of carrying the step's
+/// need no u step finer than their own error. The iterations end only on a u step at the
+/// fixed floor (one more iteration when they meet the tolerance on a relaxed one, and the
+/// cap's last iteration at it), so the answer carries the same bound as without. Each CG solve then stops after a few iterations instead of carrying the step's
 /// whole residual down to the floor in the first (the 8 mm quarter slump: 35 instead of 130
 /// CG iterations a step; docs/validation.md).
 #[allow(clippy::too_many_arguments)]
@@ -595,6 +596,13 @@ pub(crate) fn solve<const D: usize>(
     };
     for iteration in 0..settings.max_iterations {
         iterations = iteration + 1;
+        // The relative floor's factor (1 without it); the last iteration the cap allows
+        // solves its u step to the fixed floor.
+        let relax = if iterations < settings.max_iterations {
+            (progress / tolerance).max(1.0)
+        } else {
+            1.0
+        };
         let load: Vec<Tensor<D>> = map_particles(n, |k| {
             lambda[k] + (op.constant[k] - gamma[k]) * row_penalty(k, r)
         });
@@ -619,7 +627,7 @@ pub(crate) fn solve<const D: usize>(
             &rhs,
             x,
             cg_tolerance,
-            residual_floor(r) * (progress / tolerance).max(1.0),
+            residual_floor(r) * relax,
             cg_max_iterations,
         );
         report.iterations += cg.iterations;
@@ -643,7 +651,13 @@ pub(crate) fn solve<const D: usize>(
         lambda = next.into_iter().map(|v| v.1).collect();
         let mismatch = max_by(n, |k| (e[k] + op.constant[k] - gamma[k]).norm());
         if mismatch <= tolerance && change <= tolerance {
-            break;
+            if relax == 1.0 {
+                break;
+            }
+            // Converged on a relaxed u step: once more at the fixed floor, so that the u a
+            // step ends with is solved as without the relative floor.
+            progress = tolerance;
+            continue;
         }
         if settings.velocity_relative {
             progress = mismatch.max(change);
