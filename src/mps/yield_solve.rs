@@ -531,7 +531,7 @@ pub(crate) struct YieldOutcome<const D: usize> {
 /// need no u step finer than their own error. The iterations end only on a u step at the
 /// fixed floor (one more iteration when they meet the tolerance on a relaxed one, and the
 /// cap's last iteration at it), so the answer carries the same bound as without. Each CG solve then stops after a few iterations instead of carrying the step's
-/// whole residual down to the floor in the first (the 8 mm quarter slump: 35 instead of 130
+/// whole residual down to the floor in the first (the 8 mm quarter slump: 39.5 instead of 132
 /// CG iterations a step; docs/validation.md).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn solve<const D: usize>(
