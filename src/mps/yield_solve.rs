@@ -528,11 +528,12 @@ pub(crate) struct YieldOutcome<const D: usize> {
 /// the first, the mismatch at the step's start): an inexact augmented Lagrangian whose u
 /// steps are only as exact as the iterations have come (a relative error criterion, Eckstein
 /// & Bertsekas 1992, Eckstein & Silva 2013). Early iterations are far from the tolerance and
-/// need no u step finer than their own error. The iterations end only on a u step at the
-/// fixed floor (one more iteration when they meet the tolerance on a relaxed one, and the
-/// cap's last iteration at it), so the answer carries the same bound as without. Each CG solve then stops after a few iterations instead of carrying the step's
-/// whole residual down to the floor in the first (the 8 mm quarter slump: 39.5 instead of 132
-/// CG iterations a step; docs/validation.md).
+/// need no u step finer than their own error: each CG solve stops after a few iterations
+/// instead of carrying the step's whole residual down to the floor in the first (the 8 mm
+/// quarter slump: 39.5 instead of 132 CG iterations a step; docs/validation.md). The
+/// iterations end only on a u step at the fixed floor (one more iteration when they meet the
+/// tolerance on a relaxed one, and the cap's last iteration at it), so the answer carries the
+/// same bound as without.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn solve<const D: usize>(
     op: &StrainOperator<D>,
