@@ -589,9 +589,13 @@ pub(crate) fn solve<const D: usize>(
     let mut anderson =
         (settings.anderson_depth > 0).then(|| Anderson::new(settings.anderson_depth as usize));
     let mut iterations = 0;
-    // How far the iterations are from the tolerance (the relative floor's measure).
-    let mut progress = if settings.velocity_relative {
+    // max_k |e_k(u) + e0_k - gamma_k|: how far the strain rates still disagree.
+    let mismatch_of = |e: &[Tensor<D>], gamma: &[Tensor<D>]| {
         max_by(n, |k| (e[k] + op.constant[k] - gamma[k]).norm())
+    };
+    // How far the iterations are from the tolerance (read by the relative floor alone).
+    let mut progress = if settings.velocity_relative {
+        mismatch_of(&e, &gamma)
     } else {
         tolerance
     };
@@ -599,7 +603,7 @@ pub(crate) fn solve<const D: usize>(
         iterations = iteration + 1;
         // The relative floor's factor (1 without it); the last iteration the cap allows
         // solves its u step to the fixed floor.
-        let relax = if iterations < settings.max_iterations {
+        let relax = if settings.velocity_relative && iterations < settings.max_iterations {
             (progress / tolerance).max(1.0)
         } else {
             1.0
@@ -650,7 +654,7 @@ pub(crate) fn solve<const D: usize>(
             .map(|_| pack(&lambda, &gamma, |k| row_penalty(k, r)));
         gamma = next.iter().map(|v| v.0).collect();
         lambda = next.into_iter().map(|v| v.1).collect();
-        let mismatch = max_by(n, |k| (e[k] + op.constant[k] - gamma[k]).norm());
+        let mismatch = mismatch_of(&e, &gamma);
         if mismatch <= tolerance && change <= tolerance {
             if relax == 1.0 {
                 break;
@@ -660,9 +664,7 @@ pub(crate) fn solve<const D: usize>(
             progress = tolerance;
             continue;
         }
-        if settings.velocity_relative {
-            progress = mismatch.max(change);
-        }
+        progress = mismatch.max(change);
         if settings.adaptive {
             let balanced = if mismatch > BALANCE_RATIO * change {
                 (r * 2.0).min(settings.penalty_pa_s)
